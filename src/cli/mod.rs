@@ -1,0 +1,71 @@
+//! The `smocap` command line.
+//!
+//! Exit codes: 0 all ok; 1 an error stopped the command (bad input, I/O); 2 usage error;
+//! 3 the command ran but some trials failed (see the report).
+
+mod demo;
+mod solve;
+mod synth;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+/// Exit code when some trials failed but the run completed.
+pub const EXIT_SOME_FAILED: u8 = 3;
+
+#[derive(Parser, Debug)]
+#[command(name = "smocap", version, about = "Joint scale–pose canonicalization of marker-based motion capture")]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Synthesize a trial from the shipped model, calibrate, solve and print a summary.
+    Demo(demo::DemoArgs),
+    /// Write a synthetic trial (TRC) and its truth (JSON) from a model.
+    Synth(synth::SynthArgs),
+    /// Calibrate a subject and solve its trials jointly for scale and pose.
+    Solve(solve::SolveArgs),
+}
+
+/// Runs the command line; errors are printed with their causes.
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Demo(a) => demo::run(a),
+        Command::Synth(a) => synth::run(a),
+        Command::Solve(a) => solve::run(a),
+    };
+    match result {
+        Ok(code) => ExitCode::from(code),
+        Err(e) => {
+            eprintln!("error: {e}");
+            for cause in e.chain().skip(1) {
+                eprintln!("  caused by: {cause}");
+            }
+            ExitCode::from(1)
+        }
+    }
+}
+
+/// Loads the context named by `--model`/`--profile` (the shipped model by default).
+pub(crate) fn load_context(model: Option<&std::path::Path>, profile: Option<&std::path::Path>) -> anyhow::Result<crate::pipeline::Context> {
+    use crate::pipeline::Context;
+    Ok(match model {
+        None if profile.is_none() => Context::shipped()?,
+        None => {
+            let (m, _) = crate::io::mjcf::parse_mjcf(crate::pipeline::context::SHIPPED_MODEL, "models/fullbody.xml")?;
+            let path = profile.unwrap_or(std::path::Path::new(""));
+            let prof = crate::model::profile::Profile::read(path)?;
+            Context::new(m, prof, &path.display().to_string(), "shipped:models/fullbody.xml".into())?
+        }
+        Some(m) => Context::from_files(m, profile)?,
+    })
+}
+
+/// Default thread count: the machine's available parallelism.
+pub(crate) fn default_threads() -> usize {
+    std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+}

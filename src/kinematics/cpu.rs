@@ -1,0 +1,161 @@
+//! CPU forward kinematics and marker Jacobian (the reference implementation).
+//!
+//! With the body convention of [`crate::model`], for a marker at world point `x` on body `b`:
+//! - a rotation motion with world axis `ω` through world point `o`, amount `f(q_c)`, adds
+//!   `f'(q_c) · ω × (x − o)` to column `q_c`; a translation adds `f'(q_c) σ ω` (`σ = w·s_parent`);
+//! - the parent offset translation `s_p ⊙ t_P` of a joint on `b`'s chain adds `R_p e_k t_P,k` to
+//!   column `s_p,k` (and a weighted translation motion adds `f(q_c) w_k ω`);
+//! - the child offset `C⁻¹ = (R_Cᵀ, −R_Cᵀ (s_a ⊙ t_C))` adds `−R_a e_k t_C,k` to column `s_a,k`;
+//! - the marker offset `s_b ⊙ o_m` adds `R_b e_k o_m,k` to column `s_b,k`.
+//!
+//! See `docs/KINEMATICS.md` for the derivation.
+
+use super::Layout;
+use crate::model::{Model, MotionKind};
+use nalgebra::{DMatrix, Matrix3, Rotation3, Unit, Vector3};
+
+/// Scratch for one evaluation. Create one per thread with [`Workspace::new`]; the evaluation
+/// functions never allocate.
+#[derive(Clone, Debug)]
+pub struct Workspace {
+    /// Body orientations in the world frame.
+    pub body_rot: Vec<Matrix3<f64>>,
+    /// Body origins in the world frame (m).
+    pub body_pos: Vec<Vector3<f64>>,
+    /// Per motion: world axis, world point on the axis (m), value `f`, derivative `f'`, factor `σ`.
+    motion_axis: Vec<Vector3<f64>>,
+    motion_origin: Vec<Vector3<f64>>,
+    motion_val: Vec<f64>,
+    motion_der: Vec<f64>,
+    motion_sigma: Vec<f64>,
+    /// Model marker positions in the world frame (m), `3·marker + axis`.
+    pub markers: Vec<f64>,
+    /// `J_yᵀ` (ny × 3M, column `3m + axis` is row `3m + axis` of `J_y`), filled by [`jacobian`].
+    pub jy_t: DMatrix<f64>,
+}
+
+impl Workspace {
+    pub fn new(model: &Model) -> Workspace {
+        let nb = model.nb();
+        let nm = model.motions.len();
+        Workspace {
+            body_rot: vec![Matrix3::identity(); nb],
+            body_pos: vec![Vector3::zeros(); nb],
+            motion_axis: vec![Vector3::zeros(); nm],
+            motion_origin: vec![Vector3::zeros(); nm],
+            motion_val: vec![0.0; nm],
+            motion_der: vec![0.0; nm],
+            motion_sigma: vec![1.0; nm],
+            markers: vec![0.0; 3 * model.markers.len()],
+            jy_t: DMatrix::zeros(model.ny(), 3 * model.markers.len()),
+        }
+    }
+
+    /// World position of marker `m` (m).
+    pub fn marker(&self, m: usize) -> Vector3<f64> {
+        Vector3::new(self.markers[3 * m], self.markers[3 * m + 1], self.markers[3 * m + 2])
+    }
+}
+
+#[inline]
+fn scale_of(y: &[f64], model: &Model, body: Option<usize>) -> Vector3<f64> {
+    match body {
+        Some(b) => {
+            let i = model.scale_index(b, 0);
+            Vector3::new(y[i], y[i + 1], y[i + 2])
+        }
+        None => Vector3::new(1.0, 1.0, 1.0),
+    }
+}
+
+/// Forward kinematics of every body and marker at state `y = [q; s]`.
+pub fn forward(model: &Model, y: &[f64], ws: &mut Workspace) {
+    for (b, body) in model.bodies.iter().enumerate() {
+        let (r_p, t_p) = match body.parent {
+            Some(p) => (ws.body_rot[p], ws.body_pos[p]),
+            None => (Matrix3::identity(), Vector3::zeros()),
+        };
+        let s_p = scale_of(y, model, body.parent);
+        let po = &body.joint.parent_offset;
+        let mut r = r_p * po.rotation.to_rotation_matrix().matrix();
+        let mut t = t_p + r_p * s_p.component_mul(&po.translation.vector);
+        for k in body.joint.motions.clone() {
+            let mo = &model.motions[k];
+            let x = mo.coordinate.map_or(0.0, |c| y[c]);
+            let (val, der) = mo.func.eval(x);
+            let axis_w = r * mo.axis;
+            ws.motion_axis[k] = axis_w;
+            ws.motion_origin[k] = t;
+            ws.motion_val[k] = val;
+            ws.motion_der[k] = der;
+            match mo.kind {
+                MotionKind::Rotation => {
+                    r *= Rotation3::from_axis_angle(&Unit::new_unchecked(mo.axis), val).matrix();
+                }
+                MotionKind::Translation => {
+                    let sigma = mo.parent_scale_weights.map_or(1.0, |w| w.dot(&s_p));
+                    ws.motion_sigma[k] = sigma;
+                    t += axis_w * (val * sigma);
+                }
+            }
+        }
+        let s_b = scale_of(y, model, Some(b));
+        let co = &body.joint.child_offset;
+        let r_b = r * co.rotation.to_rotation_matrix().matrix().transpose();
+        ws.body_pos[b] = t - r_b * s_b.component_mul(&co.translation.vector);
+        ws.body_rot[b] = r_b;
+    }
+    for (m, mk) in model.markers.iter().enumerate() {
+        let s_b = scale_of(y, model, Some(mk.body));
+        let x = ws.body_pos[mk.body] + ws.body_rot[mk.body] * s_b.component_mul(&mk.offset);
+        ws.markers[3 * m..3 * m + 3].copy_from_slice(x.as_slice());
+    }
+}
+
+/// Fills `ws.jy_t` with `J_yᵀ` at the state of the last [`forward`] call.
+pub fn jacobian(model: &Model, layout: &Layout, ws: &mut Workspace) {
+    for (m, mk) in model.markers.iter().enumerate() {
+        let x = ws.marker(m);
+        let mut cols = ws.jy_t.columns_mut(3 * m, 3);
+        for &j in &layout.marker_y[m] {
+            cols.row_mut(j).fill(0.0);
+        }
+        let mut add = |j: usize, v: Vector3<f64>| {
+            for a in 0..3 {
+                cols[(j, a)] += v[a];
+            }
+        };
+        for &a in model.chain(mk.body) {
+            let body = &model.bodies[a];
+            if let Some(p) = body.parent {
+                let t_p = body.joint.parent_offset.translation.vector;
+                for k in 0..3 {
+                    add(model.scale_index(p, k), ws.body_rot[p].column(k) * t_p[k]);
+                }
+            }
+            for k in body.joint.motions.clone() {
+                let mo = &model.motions[k];
+                let w = ws.motion_axis[k];
+                if let Some(c) = mo.coordinate {
+                    let d = match mo.kind {
+                        MotionKind::Rotation => w.cross(&(x - ws.motion_origin[k])) * ws.motion_der[k],
+                        MotionKind::Translation => w * (ws.motion_der[k] * ws.motion_sigma[k]),
+                    };
+                    add(c, d);
+                }
+                if let (MotionKind::Translation, Some(wts), Some(p)) = (mo.kind, mo.parent_scale_weights, body.parent) {
+                    for k2 in 0..3 {
+                        add(model.scale_index(p, k2), w * (ws.motion_val[k] * wts[k2]));
+                    }
+                }
+            }
+            let t_c = body.joint.child_offset.translation.vector;
+            for k in 0..3 {
+                add(model.scale_index(a, k), -ws.body_rot[a].column(k) * t_c[k]);
+            }
+        }
+        for k in 0..3 {
+            add(model.scale_index(mk.body, k), ws.body_rot[mk.body].column(k) * mk.offset[k]);
+        }
+    }
+}

@@ -1,0 +1,14 @@
+//! smocap: joint scale–pose canonicalization of marker-based motion capture.
+//!
+//! Data flows through the modules in this order: [`io`] (marker files, model files) →
+//! [`model`] (immutable tree, scales, markers, proxy map) → [`kinematics`] (forward kinematics,
+//! Jacobians, Gauss–Newton assembly) → [`solve`] (trust-region QP, QP backends, calibration) →
+//! [`pipeline`] (trials, reports) → the `smocap` command line.
+
+pub mod io;
+pub mod kinematics;
+pub mod model;
+pub mod pipeline;
+pub mod cli;
+pub mod solve;
+pub mod synth;

@@ -1,0 +1,140 @@
+//! Solver profiles: how a model's coordinates and scale factors are driven by the proxies that
+//! the solver moves, plus marker weights and solver overrides. Read from TOML; see
+//! `models/fullbody.toml` for a documented example.
+//!
+//! ```toml
+//! [[coupling]]                     # several coordinates driven by one proxy (e.g. a "poly" spine)
+//! proxy = "lumbar_flexion"
+//! range = [-1.0, 1.0]              # proxy range (rad)
+//! coordinates = ["L5_S1_flexion", "L4_L5_flexion"]
+//! coefficients = [[0.0, 0.3], [0.0, 0.25, 0.01]]   # polynomial in the proxy, per coordinate
+//!
+//! [fixed]                          # coordinates held at a value (rad or m)
+//! mtp_angle_r = 0.0
+//!
+//! [[scale_group]]                  # bodies sharing scale factors
+//! name = "thigh"
+//! bodies = ["femur_r", "femur_l"]
+//! axes = "uniform"                 # "uniform": one factor; "xyz": one per body axis
+//! range = [0.6, 1.6]
+//!
+//! [markers]
+//! default_weight = 1.0
+//! weights = { LASI = 2.0 }
+//! exclude = ["RBAK"]
+//!
+//! [solver]                         # overrides of the solver settings (see solve::SolverSettings)
+//! max_iterations = 20
+//! ```
+//! Coordinates named nowhere get their own identity proxy; bodies in no scale group keep scale 1.
+
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// How the scale factors of a group are shared.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum ScaleAxes {
+    /// One factor for x, y and z of every body in the group.
+    #[default]
+    Uniform,
+    /// One factor per body axis, shared by the bodies of the group.
+    Xyz,
+}
+
+/// Coordinates driven by polynomials of one proxy.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Coupling {
+    pub proxy: String,
+    /// Proxy range `[lo, hi]` (rad or m).
+    pub range: [f64; 2],
+    pub coordinates: Vec<String>,
+    /// Per coordinate, polynomial coefficients `[c0, c1, c2, …]` in the proxy.
+    pub coefficients: Vec<Vec<f64>>,
+}
+
+/// Bodies whose scale factors are one set of proxies.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScaleGroup {
+    pub name: String,
+    pub bodies: Vec<String>,
+    #[serde(default)]
+    pub axes: ScaleAxes,
+    /// Allowed range of the factors.
+    #[serde(default = "default_scale_range")]
+    pub range: [f64; 2],
+}
+
+fn default_scale_range() -> [f64; 2] {
+    [0.5, 2.0]
+}
+
+/// Marker weighting and selection.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MarkerSettings {
+    /// Weight of markers not named in `weights` (when set, it replaces the model's own weight).
+    pub default_weight: Option<f64>,
+    #[serde(default)]
+    pub weights: BTreeMap<String, f64>,
+    /// Markers never used by the solver.
+    #[serde(default)]
+    pub exclude: Vec<String>,
+}
+
+/// A solver profile (see the module docs for the format).
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Profile {
+    /// Model file this profile belongs to, relative to the profile (informational).
+    pub model: Option<String>,
+    #[serde(default, rename = "coupling")]
+    pub couplings: Vec<Coupling>,
+    #[serde(default)]
+    pub fixed: BTreeMap<String, f64>,
+    #[serde(default, rename = "scale_group")]
+    pub scale_groups: Vec<ScaleGroup>,
+    #[serde(default)]
+    pub markers: MarkerSettings,
+    /// Overrides of solver settings, interpreted by the solve layer.
+    #[serde(default)]
+    pub solver: toml::Table,
+}
+
+/// Errors reading a profile.
+#[derive(Debug, thiserror::Error)]
+pub enum ProfileError {
+    #[error("cannot read profile {path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("profile {path}: {message}")]
+    Parse { path: PathBuf, message: String },
+}
+
+impl Profile {
+    /// Reads a profile from a TOML file.
+    pub fn read(path: &Path) -> Result<Profile, ProfileError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ProfileError::Io { path: path.into(), source })?;
+        Profile::parse(&text, path)
+    }
+
+    /// Parses profile TOML; `path` is used in error messages only.
+    pub fn parse(text: &str, path: &Path) -> Result<Profile, ProfileError> {
+        toml::from_str(text).map_err(|e| ProfileError::Parse { path: path.into(), message: e.to_string() })
+    }
+
+    /// The profile used when none is given: every coordinate its own proxy, every body its own
+    /// uniform scale factor.
+    pub fn default_for(model: &crate::model::Model) -> Profile {
+        Profile {
+            scale_groups: model
+                .bodies
+                .iter()
+                .map(|b| ScaleGroup { name: b.name.clone(), bodies: vec![b.name.clone()], axes: ScaleAxes::Uniform, range: default_scale_range() })
+                .collect(),
+            ..Profile::default()
+        }
+    }
+}

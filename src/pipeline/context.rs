@@ -1,0 +1,90 @@
+//! Everything that stays fixed while solving the trials of a subject.
+
+use crate::io::mjcf::{self, MjcfError};
+use crate::kinematics::assembly::Evaluator;
+use crate::model::profile::{Profile, ProfileError};
+use crate::model::proxy::{ProxyError, ProxyMap};
+use crate::model::Model;
+use crate::solve::SolverSettings;
+use std::path::Path;
+
+/// The shipped full-body model (MJCF) and its solver profile, embedded in the binary.
+pub const SHIPPED_MODEL: &str = include_str!("../../models/fullbody.xml");
+pub const SHIPPED_PROFILE: &str = include_str!("../../models/fullbody.toml");
+
+/// Errors setting up a subject.
+#[derive(Debug, thiserror::Error)]
+pub enum ContextError {
+    #[error(transparent)]
+    Mjcf(#[from] MjcfError),
+    #[error(transparent)]
+    Profile(#[from] ProfileError),
+    #[error("profile does not fit the model: {0}")]
+    Proxy(#[from] ProxyError),
+    #[error("profile {path}: {message}")]
+    Settings { path: String, message: String },
+    #[error("profile {path}: marker '{name}' is not in the model (it has: {valid})")]
+    UnknownMarker { path: String, name: String, valid: String },
+}
+
+/// Model, proxy map, marker weights and settings of one subject.
+#[derive(Debug)]
+pub struct Context {
+    pub model: Model,
+    pub profile: Profile,
+    pub proxy: ProxyMap,
+    pub settings: SolverSettings,
+    /// Weight of each model marker's squared error (0 = excluded).
+    pub marker_weights: Vec<f64>,
+    /// Where the model and profile came from (for reports).
+    pub model_source: String,
+}
+
+impl Context {
+    /// Builds a context; `profile_name` is used in error messages.
+    pub fn new(model: Model, profile: Profile, profile_name: &str, model_source: String) -> Result<Context, ContextError> {
+        let proxy = ProxyMap::new(&model, &profile)?;
+        let settings = SolverSettings::from_table(&profile.solver).map_err(|message| ContextError::Settings { path: profile_name.into(), message })?;
+        let valid = || model.markers.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join(", ");
+        for name in profile.markers.weights.keys().chain(&profile.markers.exclude) {
+            if model.marker_index(name).is_none() {
+                return Err(ContextError::UnknownMarker { path: profile_name.into(), name: name.clone(), valid: valid() });
+            }
+        }
+        let marker_weights = model
+            .markers
+            .iter()
+            .map(|m| {
+                if profile.markers.exclude.contains(&m.name) {
+                    0.0
+                } else {
+                    profile.markers.weights.get(&m.name).copied().or(profile.markers.default_weight).unwrap_or(m.weight)
+                }
+            })
+            .collect();
+        Ok(Context { model, profile, proxy, settings, marker_weights, model_source })
+    }
+
+    /// The shipped full-body model with its profile.
+    pub fn shipped() -> Result<Context, ContextError> {
+        let (model, _warnings) = mjcf::parse_mjcf(SHIPPED_MODEL, "models/fullbody.xml")?;
+        let profile = Profile::parse(SHIPPED_PROFILE, Path::new("models/fullbody.toml"))?;
+        Context::new(model, profile, "models/fullbody.toml", "shipped:models/fullbody.xml".into())
+    }
+
+    /// A model file (MJCF) with an optional profile file (default: every coordinate free,
+    /// every body its own uniform scale).
+    pub fn from_files(model_path: &Path, profile_path: Option<&Path>) -> Result<Context, ContextError> {
+        let (model, _warnings) = mjcf::read_mjcf(model_path)?;
+        let (profile, name) = match profile_path {
+            Some(p) => (Profile::read(p)?, p.display().to_string()),
+            None => (Profile::default_for(&model), "<default profile>".to_string()),
+        };
+        Context::new(model, profile, &name, model_path.display().to_string())
+    }
+
+    /// Evaluator over this context's model and proxy map.
+    pub fn evaluator(&self) -> Evaluator<'_> {
+        Evaluator::new(&self.model, &self.proxy)
+    }
+}

@@ -1,0 +1,217 @@
+//! The JSON report (`--report-json`) and its human-readable table.
+
+use super::stats::{MeanP50P90, P50P90};
+use super::{Context, TrialResult};
+use crate::model::proxy::ProxyKind;
+use crate::solve::{FrameStatus, SolverSettings};
+use crate::synth::Truth;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// Pose error against a truth (degrees, rotational coordinates that the solver moves).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
+pub struct PoseError {
+    pub rmse: f64,
+    pub p90: f64,
+}
+
+/// Scale error against a truth (percent, over the scale proxies).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
+pub struct ScaleError {
+    pub mean: f64,
+    pub max: f64,
+}
+
+/// One trial in the report.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TrialReport {
+    pub trial: String,
+    /// "ok" or "failed".
+    pub status: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+    pub frames: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub marker_rmse_mm: Option<MeanP50P90>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ms_per_frame: Option<P50P90>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub iterations: Option<P50P90>,
+    pub solve_wall_s: f64,
+    /// Per-body scale factors `[sx, sy, sz]`: the mean over the trial's frames.
+    pub scale: BTreeMap<String, [f64; 3]>,
+    /// Largest per-frame deviation of any scale proxy from the calibrated value.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scale_drift_max: Option<f64>,
+    /// Frames bridged for lack of markers.
+    pub bridged_frames: Vec<usize>,
+    /// Frames that hit the iteration cap.
+    pub frames_at_iteration_cap: usize,
+    pub unmatched_model_markers: Vec<String>,
+    pub unmatched_trial_markers: Vec<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pose_error_deg: Option<PoseError>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scale_error_pct: Option<ScaleError>,
+}
+
+/// Totals over the run.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Totals {
+    pub frames: usize,
+    pub solve_wall_s: f64,
+    pub frames_per_s: f64,
+}
+
+/// The whole report.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Report {
+    pub smocap_version: String,
+    pub backend: String,
+    pub qp_backend: String,
+    pub threads: usize,
+    pub model: String,
+    pub settings: SolverSettings,
+    pub trials: Vec<TrialReport>,
+    pub totals: Totals,
+}
+
+impl Report {
+    pub fn new(ctx: &Context, threads: usize) -> Report {
+        Report {
+            smocap_version: env!("CARGO_PKG_VERSION").into(),
+            backend: "cpu".into(),
+            qp_backend: format!("{:?}", ctx.settings.qp).to_lowercase(),
+            threads,
+            model: ctx.model_source.clone(),
+            settings: ctx.settings.clone(),
+            trials: Vec::new(),
+            totals: Totals::default(),
+        }
+    }
+
+    /// Adds a trial (and updates the totals).
+    pub fn push(&mut self, t: TrialReport) {
+        self.totals.frames += t.frames;
+        self.totals.solve_wall_s += t.solve_wall_s;
+        self.totals.frames_per_s = if self.totals.solve_wall_s > 0.0 { self.totals.frames as f64 / self.totals.solve_wall_s } else { 0.0 };
+        self.trials.push(t);
+    }
+
+    /// A failed trial.
+    pub fn failed(name: &str, error: String) -> TrialReport {
+        TrialReport {
+            trial: name.into(),
+            status: "failed".into(),
+            error: Some(error),
+            frames: 0,
+            marker_rmse_mm: None,
+            ms_per_frame: None,
+            iterations: None,
+            solve_wall_s: 0.0,
+            scale: BTreeMap::new(),
+            scale_drift_max: None,
+            bridged_frames: Vec::new(),
+            frames_at_iteration_cap: 0,
+            unmatched_model_markers: Vec::new(),
+            unmatched_trial_markers: Vec::new(),
+            pose_error_deg: None,
+            scale_error_pct: None,
+        }
+    }
+
+    /// Fixed-width table, one line per trial (METHOD.md's columns).
+    pub fn table(&self) -> String {
+        let mut s = format!(
+            "{:<28} {:>7} {:>9} {:>8} {:>8} {:>6} {:>6} {:>8} {:>8}\n",
+            "trial", "frames", "FPS", "ms p50", "ms p90", "it p50", "it p90", "RMSE p50", "RMSE p90"
+        );
+        for t in &self.trials {
+            match (&t.ms_per_frame, &t.iterations, &t.marker_rmse_mm) {
+                (Some(ms), Some(it), Some(r)) => s += &format!(
+                    "{:<28} {:>7} {:>9.0} {:>8.3} {:>8.3} {:>6.0} {:>6.0} {:>8.2} {:>8.2}\n",
+                    t.trial,
+                    t.frames,
+                    t.frames as f64 / t.solve_wall_s.max(1e-12),
+                    ms.p50,
+                    ms.p90,
+                    it.p50,
+                    it.p90,
+                    r.p50,
+                    r.p90
+                ),
+                _ => s += &format!("{:<28} failed: {}\n", t.trial, t.error.clone().unwrap_or_default()),
+            }
+        }
+        s
+    }
+}
+
+/// Summarises a solved trial, with errors against `truth` when given.
+pub fn trial_report(ctx: &Context, r: &TrialResult, truth: Option<&Truth>) -> TrialReport {
+    let n = r.proxies.len();
+    let solved: Vec<usize> = (0..n).filter(|&f| r.stats[f].status != FrameStatus::TooFewMarkers).collect();
+    let rmse_mm: Vec<f64> = solved.iter().map(|&f| r.stats[f].rmse_m * 1e3).collect();
+    let ms: Vec<f64> = solved.iter().map(|&f| r.frame_seconds[f] * 1e3).collect();
+    let its: Vec<f64> = solved.iter().map(|&f| r.stats[f].iterations as f64).collect();
+    let scale_k: Vec<usize> = (0..ctx.proxy.np()).filter(|&k| ctx.proxy.proxies[k].kind == ProxyKind::Scale).collect();
+    let mean_p: Vec<f64> = (0..ctx.proxy.np()).map(|k| solved.iter().map(|&f| r.proxies[f][k]).sum::<f64>() / solved.len().max(1) as f64).collect();
+    let y_mean = ctx.proxy.state(&mean_p);
+    let scale = ctx.model.bodies.iter().enumerate().map(|(b, body)| (body.name.clone(), [0, 1, 2].map(|a| y_mean[ctx.model.scale_index(b, a)]))).collect();
+    let drift = scale_k
+        .iter()
+        .flat_map(|&k| solved.iter().map(move |&f| (r.proxies[f][k] - r.calibration.proxies[k]).abs()))
+        .fold(0.0f64, f64::max);
+    let (pose_error_deg, scale_error_pct) = match truth {
+        Some(t) => errors_against(ctx, r, &mean_p, &scale_k, t),
+        None => (None, None),
+    };
+    TrialReport {
+        trial: r.name.clone(),
+        status: "ok".into(),
+        error: None,
+        frames: n,
+        marker_rmse_mm: Some(MeanP50P90::of(&rmse_mm)),
+        ms_per_frame: Some(P50P90::of(&ms)),
+        iterations: Some(P50P90::of(&its)),
+        solve_wall_s: r.wall_seconds,
+        scale,
+        scale_drift_max: (!scale_k.is_empty()).then_some(drift),
+        bridged_frames: r.bridged.clone(),
+        frames_at_iteration_cap: r.stats.iter().filter(|s| s.status == FrameStatus::MaxIterations).count(),
+        unmatched_model_markers: r.unmatched_model.clone(),
+        unmatched_trial_markers: r.unmatched_trial.clone(),
+        pose_error_deg,
+        scale_error_pct,
+    }
+}
+
+fn errors_against(ctx: &Context, r: &TrialResult, mean_p: &[f64], scale_k: &[usize], t: &Truth) -> (Option<PoseError>, Option<ScaleError>) {
+    use crate::model::CoordinateKind;
+    // Rotational coordinates the solver moves, present in the truth.
+    let moved: Vec<(usize, usize)> = ctx
+        .model
+        .coordinates
+        .iter()
+        .enumerate()
+        .filter(|(j, c)| c.kind == CoordinateKind::Rotational && !ctx.proxy.y_terms[*j].is_empty())
+        .filter_map(|(j, c)| t.coordinate_names.iter().position(|n| n == &c.name).map(|tj| (j, tj)))
+        .collect();
+    let mut errs = Vec::new();
+    for (f, p) in r.proxies.iter().enumerate().take(t.coordinates.len()) {
+        let y = ctx.proxy.state(p);
+        for &(j, tj) in &moved {
+            errs.push((y[j] - t.coordinates[f][tj]).to_degrees().abs());
+        }
+    }
+    let pose = (!errs.is_empty()).then(|| PoseError {
+        rmse: (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt(),
+        p90: super::stats::percentile(&errs, 0.9),
+    });
+    let serr: Vec<f64> = scale_k
+        .iter()
+        .filter_map(|&k| t.scales.get(&ctx.proxy.proxies[k].name).map(|&truth| (mean_p[k] / truth - 1.0).abs() * 100.0))
+        .collect();
+    let scale = (!serr.is_empty()).then(|| ScaleError { mean: serr.iter().sum::<f64>() / serr.len() as f64, max: serr.iter().copied().fold(0.0, f64::max) });
+    (pose, scale)
+}

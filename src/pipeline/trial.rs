@@ -1,0 +1,229 @@
+//! Solving one trial: match markers, calibrate the subject (from a static trial or frames of the
+//! motion), then solve every frame warm-started from the previous one. Long trials are cut into
+//! segments solved in parallel, each cold-started. Frames with too few markers are reported and
+//! bridged from their neighbours.
+
+use super::Context;
+use crate::io::MarkerTrial;
+use crate::kinematics::assembly::FrameProblem;
+use crate::model::proxy::ProxyKind;
+use crate::solve::init::cold_start;
+use crate::solve::{calibrate, make_qp, Calibration, FrameSolver, FrameStats, FrameStatus, WarmStart};
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// Why a trial could not be solved.
+#[derive(Debug, thiserror::Error)]
+pub enum TrialError {
+    #[error("trial '{trial}': none of its markers matches the model's (trial has: {trial_labels}; model has: {model_labels})")]
+    NoMarkerMatch { trial: String, trial_labels: String, model_labels: String },
+    #[error("trial '{trial}' has no frames")]
+    Empty { trial: String },
+    #[error("trial '{trial}': no frame has at least {min} observed markers, nothing to calibrate on")]
+    NothingToCalibrate { trial: String, min: usize },
+}
+
+/// Result of one trial.
+#[derive(Clone, Debug)]
+pub struct TrialResult {
+    pub name: String,
+    /// Proxies per frame.
+    pub proxies: Vec<Vec<f64>>,
+    /// Per-frame statistics (bridged frames have status `TooFewMarkers`).
+    pub stats: Vec<FrameStats>,
+    /// Per-frame solve time (s), I/O excluded.
+    pub frame_seconds: Vec<f64>,
+    pub calibration: Calibration,
+    /// Frames bridged from neighbours because too few markers were observed.
+    pub bridged: Vec<usize>,
+    /// Model markers the trial does not provide, and trial labels the model lacks.
+    pub unmatched_model: Vec<String>,
+    pub unmatched_trial: Vec<String>,
+    /// Wall time of all frames (s), calibration excluded.
+    pub wall_seconds: f64,
+    pub threads: usize,
+}
+
+/// For each model marker, the trial column that observes it.
+pub fn match_markers(ctx: &Context, trial: &MarkerTrial) -> (Vec<Option<usize>>, Vec<String>, Vec<String>) {
+    let map: Vec<Option<usize>> = ctx.model.markers.iter().map(|m| trial.labels.iter().position(|l| l == &m.name)).collect();
+    let unmatched_model = ctx.model.markers.iter().zip(&map).filter(|(_, c)| c.is_none()).map(|(m, _)| m.name.clone()).collect();
+    let unmatched_trial = trial.labels.iter().filter(|l| ctx.model.marker_index(l).is_none()).cloned().collect();
+    (map, unmatched_model, unmatched_trial)
+}
+
+/// Observations in model-marker order, frame-major (`frame · 3M + 3·marker + axis`), NaN gaps.
+pub fn observations(trial: &MarkerTrial, map: &[Option<usize>]) -> Vec<f64> {
+    let nm = map.len();
+    let mut out = vec![f64::NAN; trial.n_frames() * nm * 3];
+    for f in 0..trial.n_frames() {
+        for (m, col) in map.iter().enumerate() {
+            if let Some(p) = col.and_then(|c| trial.position(f, c)) {
+                out[(f * nm + m) * 3..(f * nm + m) * 3 + 3].copy_from_slice(&p);
+            }
+        }
+    }
+    out
+}
+
+fn observed_count(obs: &[f64]) -> usize {
+    obs.chunks_exact(3).filter(|c| !c[0].is_nan() && !c[1].is_nan() && !c[2].is_nan()).count()
+}
+
+/// Up to `k` frames spread evenly over those with the most observed markers.
+fn calibration_frames(obs: &[f64], stride: usize, k: usize, min: usize) -> Vec<usize> {
+    let counts: Vec<usize> = obs.chunks(stride).map(observed_count).collect();
+    let best = counts.iter().copied().max().unwrap_or(0);
+    let good: Vec<usize> = (0..counts.len()).filter(|&f| counts[f] >= min && counts[f] + 2 >= best).collect();
+    if good.is_empty() || k == 0 {
+        return good;
+    }
+    let n = good.len().min(k);
+    (0..n).map(|i| good[(i * good.len()) / n + good.len() / (2 * n)]).collect()
+}
+
+/// Calibrates one subject's morphology from frames pooled over `trials` (a static trial, or
+/// the motion trials themselves).
+pub fn calibrate_subject(ctx: &Context, trials: &[(&str, &MarkerTrial)]) -> Result<Calibration, TrialError> {
+    let settings = &ctx.settings;
+    let stride = 3 * ctx.model.markers.len();
+    let per_trial = settings.calibration_frames.div_ceil(trials.len().max(1));
+    let mut pooled: Vec<f64> = Vec::new();
+    for (name, t) in trials {
+        let (map, _, _) = match_markers(ctx, t);
+        if map.iter().all(Option::is_none) {
+            return Err(no_match(ctx, name, t));
+        }
+        let o = observations(t, &map);
+        for f in calibration_frames(&o, stride, per_trial, settings.min_markers) {
+            pooled.extend_from_slice(&o[f * stride..(f + 1) * stride]);
+        }
+    }
+    if pooled.is_empty() {
+        let trial = trials.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ");
+        return Err(TrialError::NothingToCalibrate { trial, min: settings.min_markers });
+    }
+    let eval = ctx.evaluator();
+    let zeros = vec![0.0; ctx.model.ny()];
+    let template = FrameProblem { observed: &[], marker_weights: &ctx.marker_weights, tracking_ref: &zeros, tracking_weights: &zeros };
+    let mut solver = FrameSolver::new(&eval, settings.clone(), make_qp(settings.qp));
+    let slices: Vec<&[f64]> = pooled.chunks(stride).collect();
+    Ok(calibrate(&mut solver, &slices, &template, &ctx.proxy.default_proxies()))
+}
+
+fn no_match(ctx: &Context, name: &str, trial: &MarkerTrial) -> TrialError {
+    TrialError::NoMarkerMatch {
+        trial: name.into(),
+        trial_labels: trial.labels.join(", "),
+        model_labels: ctx.model.markers.iter().map(|m| m.name.clone()).collect::<Vec<_>>().join(", "),
+    }
+}
+
+/// Solves every frame of `trial` for a subject calibrated as `calibration`, using up to
+/// `threads` segments in parallel.
+pub fn solve_trial(ctx: &Context, name: &str, trial: &MarkerTrial, calibration: &Calibration, threads: usize) -> Result<TrialResult, TrialError> {
+    let start = Instant::now();
+    let nm = ctx.model.markers.len();
+    let stride = 3 * nm;
+    let (map, unmatched_model, unmatched_trial) = match_markers(ctx, trial);
+    if map.iter().all(Option::is_none) {
+        return Err(no_match(ctx, name, trial));
+    }
+    if trial.n_frames() == 0 {
+        return Err(TrialError::Empty { trial: name.into() });
+    }
+    let obs = observations(trial, &map);
+    let settings = &ctx.settings;
+    let eval = ctx.evaluator();
+    let ny = ctx.model.ny();
+    let np = ctx.proxy.np();
+
+    // Tracking: scales toward the calibration, coordinates weakly toward the warm start.
+    let y_cal = ctx.proxy.state(&calibration.proxies);
+    let mut track_w = vec![0.0; ny];
+    for t in &ctx.proxy.terms {
+        let kind = ctx.proxy.proxies[t.proxy].kind;
+        track_w[t.y_index] = if kind == ProxyKind::Scale { settings.scale_tracking_weight } else { settings.pose_prior_weight };
+    }
+
+    // Segments solved in parallel.
+    let n = trial.n_frames();
+    let threads = threads.max(1);
+    let segments = threads.min(n.div_ceil(100)).max(1);
+    let bounds: Vec<(usize, usize)> = (0..segments).map(|i| (i * n / segments, (i + 1) * n / segments)).collect();
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().ok();
+    let run = || {
+        bounds
+            .par_iter()
+            .map(|&(a, b)| {
+                let mut solver = FrameSolver::new(&eval, settings.clone(), make_qp(settings.qp));
+                let mut reference = y_cal.clone();
+                let mut out = Vec::with_capacity(b - a);
+                let mut prev: Option<Vec<f64>> = None;
+                let mut prev2: Option<Vec<f64>> = None;
+                for f in a..b {
+                    let t0 = Instant::now();
+                    let o = &obs[f * stride..(f + 1) * stride];
+                    let mut p = match (&prev, &prev2, settings.warm_start) {
+                        (Some(p1), Some(p2), WarmStart::Extrapolate) => p1.iter().zip(p2).map(|(x1, x2)| 2.0 * x1 - x2).collect(),
+                        (Some(p1), _, _) => p1.clone(),
+                        (None, _, _) => calibration.proxies.clone(),
+                    };
+                    solver.clamp(&mut p);
+                    let y_warm = ctx.proxy.state(&p);
+                    reference[..ctx.model.nq()].copy_from_slice(&y_warm[..ctx.model.nq()]);
+                    let frame = FrameProblem { observed: o, marker_weights: &ctx.marker_weights, tracking_ref: &reference, tracking_weights: &track_w };
+                    if prev.is_none() {
+                        cold_start(&mut solver, &frame, &mut p);
+                    }
+                    let stats = solver.solve(&frame, &mut p);
+                    let ok = stats.status != FrameStatus::TooFewMarkers;
+                    out.push((p.clone(), stats, t0.elapsed().as_secs_f64()));
+                    if ok {
+                        prev2 = prev.replace(p);
+                    }
+                }
+                out
+            })
+            .collect::<Vec<_>>()
+    };
+    let pieces = match &pool {
+        Some(pool) => pool.install(run),
+        None => run(),
+    };
+    let mut proxies = Vec::with_capacity(n);
+    let mut stats = Vec::with_capacity(n);
+    let mut frame_seconds = Vec::with_capacity(n);
+    for (p, s, t) in pieces.into_iter().flatten() {
+        proxies.push(p);
+        stats.push(s);
+        frame_seconds.push(t);
+    }
+    // Bridge frames without enough markers from the nearest solved neighbours.
+    let solved: Vec<usize> = (0..n).filter(|&f| stats[f].status != FrameStatus::TooFewMarkers).collect();
+    let bridged: Vec<usize> = (0..n).filter(|&f| stats[f].status == FrameStatus::TooFewMarkers).collect();
+    for &f in &bridged {
+        let before = solved.iter().rev().find(|&&g| g < f);
+        let after = solved.iter().find(|&&g| g > f);
+        proxies[f] = match (before, after) {
+            (Some(&g0), Some(&g1)) => {
+                let w = (f - g0) as f64 / (g1 - g0) as f64;
+                (0..np).map(|k| (1.0 - w) * proxies[g0][k] + w * proxies[g1][k]).collect()
+            }
+            (Some(&g), None) | (None, Some(&g)) => proxies[g].clone(),
+            (None, None) => calibration.proxies.clone(),
+        };
+    }
+    Ok(TrialResult {
+        name: name.into(),
+        proxies,
+        stats,
+        frame_seconds,
+        calibration: calibration.clone(),
+        bridged,
+        unmatched_model,
+        unmatched_trial,
+        wall_seconds: start.elapsed().as_secs_f64(),
+        threads,
+    })
+}

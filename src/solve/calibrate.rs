@@ -1,0 +1,153 @@
+//! Subject calibration: one morphology per subject from several frames at once.
+//!
+//! Unknowns: the shared scale proxies `s` and one set of pose proxies `q_k` per frame `k`.
+//! Each frame contributes its Gauss–Newton blocks `[A_k B_k; B_kᵀ C_k]` (pose/scale); the
+//! damped step eliminates the poses through the Schur complement
+//! ```text
+//! (C + Σ C_k − Σ B_kᵀ A_k⁻¹ B_k) Δs = −g_s − Σ (g_s,k − B_kᵀ A_k⁻¹ g_q,k)
+//! Δq_k = −A_k⁻¹ (g_q,k + B_k Δs)
+//! ```
+//! (`A_k`, `C` damped Levenberg–Marquardt style), clipped to the proxy ranges and accepted when
+//! the total objective decreases. A weak prior pulls unobservable scales toward 1.
+
+use super::init::cold_start;
+use super::trqp::FrameSolver;
+use crate::kinematics::assembly::FrameProblem;
+use crate::model::proxy::ProxyKind;
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+/// What calibration found.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Calibration {
+    /// Full proxy vector whose scale entries are the subject's morphology (pose entries: the
+    /// last calibration frame's pose).
+    pub proxies: Vec<f64>,
+    /// Frames used.
+    pub frames: usize,
+    /// Outer iterations run.
+    pub iterations: u32,
+    /// Mean marker RMSE over the calibration frames (m).
+    pub rmse_m: f64,
+}
+
+/// Calibrates the scale proxies on `frames` (observed marker arrays, `3·marker + axis`, NaN gaps).
+/// `frame_template` supplies weights and tracking arrays (its `observed` is ignored).
+pub fn calibrate(solver: &mut FrameSolver<'_>, frames: &[&[f64]], frame_template: &FrameProblem<'_>, p0: &[f64]) -> Calibration {
+    let eval = solver.eval;
+    let proxy = eval.proxy;
+    let np = proxy.np();
+    let scale: Vec<usize> = (0..np).filter(|&k| proxy.proxies[k].kind == ProxyKind::Scale).collect();
+    let pose: Vec<usize> = (0..np).filter(|&k| proxy.proxies[k].kind != ProxyKind::Scale).collect();
+    let (ns, nq) = (scale.len(), pose.len());
+    let s = solver.settings.clone();
+    let prior = s.calibration_scale_prior;
+
+    // Per-frame poses at the starting scale.
+    let mut poses: Vec<Vec<f64>> = Vec::with_capacity(frames.len());
+    for obs in frames {
+        let fp = FrameProblem { observed: obs, ..*frame_template };
+        let mut p = p0.to_vec();
+        cold_start(solver, &fp, &mut p);
+        let saved = std::mem::replace(&mut solver.free, (0..np).map(|k| proxy.proxies[k].kind != ProxyKind::Scale).collect());
+        solver.solve(&fp, &mut p);
+        solver.free = saved;
+        poses.push(p);
+    }
+    let mut shared: Vec<f64> = scale.iter().map(|&k| p0[k]).collect();
+    let total = |solver: &mut FrameSolver<'_>, poses: &[Vec<f64>], shared: &[f64]| -> (f64, f64) {
+        let mut e = 0.0;
+        let mut rmse = 0.0;
+        for (obs, p) in frames.iter().zip(poses) {
+            let mut p = p.clone();
+            for (i, &k) in scale.iter().enumerate() {
+                p[k] = shared[i];
+            }
+            let fp = FrameProblem { observed: obs, ..*frame_template };
+            let (ek, sq, used) = eval.energy(&p, &fp, &mut solver.ws);
+            e += ek;
+            rmse += if used > 0 { (sq / used as f64).sqrt() } else { 0.0 };
+        }
+        e += 0.5 * prior * shared.iter().map(|v| (v - 1.0).powi(2)).sum::<f64>();
+        (e, rmse / frames.len().max(1) as f64)
+    };
+    let (mut energy, mut rmse) = total(solver, &poses, &shared);
+    let mut lambda = 1e-4;
+    let mut iterations = 0;
+    let (lo, hi): (Vec<f64>, Vec<f64>) = proxy.proxies.iter().map(|p| p.range).unzip();
+    while iterations < s.calibration_max_iterations && !frames.is_empty() {
+        iterations += 1;
+        // Assemble the Schur complement.
+        let mut schur = DMatrix::<f64>::zeros(ns, ns);
+        let mut rhs = DVector::<f64>::zeros(ns);
+        let mut blocks = Vec::with_capacity(frames.len());
+        for (i, &k) in scale.iter().enumerate() {
+            schur[(i, i)] += prior;
+            rhs[i] -= prior * (shared[i] - 1.0);
+            let _ = k;
+        }
+        for (obs, p) in frames.iter().zip(&poses) {
+            let mut p = p.clone();
+            for (i, &k) in scale.iter().enumerate() {
+                p[k] = shared[i];
+            }
+            let fp = FrameProblem { observed: obs, ..*frame_template };
+            eval.linearize(&p, &fp, &mut solver.ws);
+            let gn = &solver.ws.gn;
+            let mut a = gn.h.select_rows(&pose).select_columns(&pose);
+            for d in 0..nq {
+                a[(d, d)] += lambda * a[(d, d)].max(s.damping_floor);
+            }
+            let b = gn.h.select_rows(&pose).select_columns(&scale);
+            let c = gn.h.select_rows(&scale).select_columns(&scale);
+            let gq = gn.g.select_rows(&pose);
+            let gs = gn.g.select_rows(&scale);
+            let Some(chol) = a.cholesky() else { continue };
+            let ainv_b = chol.solve(&b);
+            let ainv_g = chol.solve(&gq);
+            schur += c - b.transpose() * &ainv_b;
+            rhs -= gs - b.transpose() * &ainv_g;
+            blocks.push((ainv_b, ainv_g));
+        }
+        for d in 0..ns {
+            schur[(d, d)] += lambda * schur[(d, d)].max(s.damping_floor);
+        }
+        let ds = match schur.clone().cholesky() {
+            Some(ch) => ch.solve(&rhs),
+            None => DVector::zeros(ns),
+        };
+        let mut new_shared = shared.clone();
+        for (i, &k) in scale.iter().enumerate() {
+            new_shared[i] = (shared[i] + ds[i]).clamp(lo[k], hi[k]);
+        }
+        let mut new_poses = poses.clone();
+        for (p, (ainv_b, ainv_g)) in new_poses.iter_mut().zip(&blocks) {
+            let dq = -(ainv_g + ainv_b * &ds);
+            for (i, &k) in pose.iter().enumerate() {
+                p[k] = (p[k] + dq[i]).clamp(lo[k], hi[k]);
+            }
+        }
+        let (e1, r1) = total(solver, &new_poses, &new_shared);
+        if e1 < energy {
+            let rel = (energy - e1) / energy.max(f64::MIN_POSITIVE);
+            poses = new_poses;
+            shared = new_shared;
+            energy = e1;
+            rmse = r1;
+            lambda = (lambda / 3.0).max(1e-9);
+            if rel < 1e-9 {
+                break;
+            }
+        } else {
+            lambda *= 4.0;
+            if lambda > 1e8 {
+                break;
+            }
+        }
+    }
+    let mut proxies = poses.last().cloned().unwrap_or_else(|| p0.to_vec());
+    for (i, &k) in scale.iter().enumerate() {
+        proxies[k] = shared[i];
+    }
+    Calibration { proxies, frames: frames.len(), iterations, rmse_m: rmse }
+}

@@ -1,0 +1,104 @@
+//! Solver settings with documented defaults. Serialised into every report and output so that a
+//! result says how it was obtained; a profile's `[solver]` table overrides any field.
+
+use serde::{Deserialize, Serialize};
+
+/// Which QP backend solves the trust-region step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum QpBackend {
+    /// Projected-Newton box QP (bounds only): the fast default.
+    #[default]
+    Boxqp,
+    /// clarabel interior point (bounds and general linear constraints).
+    Clarabel,
+}
+
+/// How a frame's first iterate is chosen from the previous frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum WarmStart {
+    /// The previous frame's solution.
+    Previous,
+    /// Linear extrapolation of the two previous solutions (clamped to the proxy ranges).
+    #[default]
+    Extrapolate,
+}
+
+/// Trust-region QP settings (units: metres, radians; scale factors dimensionless).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SolverSettings {
+    /// Cap on trust-region iterations (QP solves) per frame. Default 20.
+    pub max_iterations: u32,
+    /// Stop when the marker RMSE falls below this (m). Default 1e-6.
+    pub residual_tol_m: f64,
+    /// Stop when an accepted step lowers `E` by less than this fraction of `E`. Default 1e-3.
+    pub rel_decrease_tol: f64,
+    /// Stop when the largest step component is below this (proxy units). Default 1e-9.
+    pub step_tol: f64,
+    /// Step box half-width for rotational proxies (rad). Default 0.5.
+    pub step_rotation_rad: f64,
+    /// Step box half-width for translational proxies (m). Default 0.25.
+    pub step_translation_m: f64,
+    /// Step box half-width for scale proxies. Default 0.1.
+    pub step_scale: f64,
+    /// Initial Levenberg–Marquardt damping `λ`; `W_damp = λ·diag(max(H_kk, damping_floor))`. Default 1e-4.
+    pub damping_init: f64,
+    /// Smallest damping. Default 1e-9.
+    pub damping_min: f64,
+    /// Largest damping; a frame that needs more stops. Default 1e8.
+    pub damping_max: f64,
+    /// Floor on the diagonal that `λ` scales. Default 1e-6.
+    pub damping_floor: f64,
+    /// `ε_ρ` in `ρ = Δf_act / (Δf_pred + ε_ρ)`. Default 1e-15.
+    pub rho_eps: f64,
+    /// Weight on `(q − q_warm)²` that keeps unobserved coordinates determined (m²/rad²). Default 1e-6.
+    pub pose_prior_weight: f64,
+    /// Weight on `(s − s_calibrated)²` in motion frames (m² per unit scale²). Default 1.0.
+    pub scale_tracking_weight: f64,
+    /// Frames with fewer observed markers are reported and bridged. Default 3.
+    pub min_markers: usize,
+    pub warm_start: WarmStart,
+    pub qp: QpBackend,
+    /// Frames used by calibration (static or motion). Default 20.
+    pub calibration_frames: usize,
+    /// Weight of the prior pulling scale factors toward 1 during calibration. Default 1e-6.
+    pub calibration_scale_prior: f64,
+    /// Iteration cap of the multi-frame calibration. Default 50.
+    pub calibration_max_iterations: u32,
+}
+
+impl Default for SolverSettings {
+    fn default() -> Self {
+        SolverSettings {
+            max_iterations: 20,
+            residual_tol_m: 1e-6,
+            rel_decrease_tol: 1e-3,
+            step_tol: 1e-9,
+            step_rotation_rad: 0.5,
+            step_translation_m: 0.25,
+            step_scale: 0.1,
+            damping_init: 1e-4,
+            damping_min: 1e-9,
+            damping_max: 1e8,
+            damping_floor: 1e-6,
+            rho_eps: 1e-15,
+            pose_prior_weight: 1e-6,
+            scale_tracking_weight: 1.0,
+            min_markers: 3,
+            warm_start: WarmStart::default(),
+            qp: QpBackend::default(),
+            calibration_frames: 20,
+            calibration_scale_prior: 1e-6,
+            calibration_max_iterations: 50,
+        }
+    }
+}
+
+impl SolverSettings {
+    /// Defaults overridden by a profile's `[solver]` table.
+    pub fn from_table(table: &toml::Table) -> Result<SolverSettings, String> {
+        toml::Value::Table(table.clone()).try_into().map_err(|e: toml::de::Error| format!("[solver]: {e}"))
+    }
+}

@@ -1,0 +1,177 @@
+//! Kinematics: analytic Jacobians against central finite differences, for every joint and
+//! function kind, at random configurations and scales (seeded).
+
+mod common;
+
+use common::{random_model, random_state};
+use smocap::kinematics::assembly::{EvalWorkspace, Evaluator, FrameProblem};
+use smocap::kinematics::{cpu, Layout};
+use smocap::model::profile::Profile;
+use smocap::model::proxy::ProxyMap;
+use smocap::model::{CubicSpline, Function};
+
+fn markers_at(model: &smocap::model::Model, y: &[f64]) -> Vec<f64> {
+    let mut ws = cpu::Workspace::new(model);
+    cpu::forward(model, y, &mut ws);
+    ws.markers.clone()
+}
+
+#[test]
+fn marker_jacobian_pose_and_scale_columns_match_central_differences() {
+    for seed in 0..12 {
+        let model = random_model(seed, 7);
+        let proxy = ProxyMap::new(&model, &Profile::default_for(&model)).unwrap();
+        let layout = Layout::new(&model, &proxy);
+        let y = random_state(&model, 100 + seed);
+        let mut ws = cpu::Workspace::new(&model);
+        cpu::forward(&model, &y, &mut ws);
+        cpu::jacobian(&model, &layout, &mut ws);
+        let h = 1e-6;
+        for j in 0..model.ny() {
+            let mut yp = y.clone();
+            let mut ym = y.clone();
+            yp[j] += h;
+            ym[j] -= h;
+            let (xp, xm) = (markers_at(&model, &yp), markers_at(&model, &ym));
+            for r in 0..xp.len() {
+                let fd = (xp[r] - xm[r]) / (2.0 * h);
+                let an = ws.jy_t[(j, r)];
+                assert!((fd - an).abs() <= 1e-6 * an.abs().max(1.0), "seed {seed}: J[{r}, {j}] analytic {an} vs fd {fd}");
+            }
+        }
+    }
+}
+
+#[test]
+fn every_function_kind_has_a_consistent_derivative() {
+    let mut r = common::rng(7);
+    for kind in 0..7 {
+        let f = common::function(&mut r, kind);
+        for i in 0..50 {
+            let x = -2.9 + i as f64 * 0.1171;
+            let h = 1e-6;
+            let fd = (f.eval(x + h).0 - f.eval(x - h).0) / (2.0 * h);
+            let d = f.eval(x).1;
+            assert!((fd - d).abs() <= 1e-6 * d.abs().max(1.0), "kind {kind} at {x}: {d} vs {fd}");
+        }
+    }
+}
+
+#[test]
+fn natural_spline_interpolates_its_knots_and_has_zero_end_curvature() {
+    let x = [0.0, 0.5, 1.3, 2.0, 3.1];
+    let y = [0.2, -0.1, 0.4, 0.0, 0.3];
+    let s = CubicSpline::natural(&x, &y).unwrap();
+    for (xi, yi) in x.iter().zip(&y) {
+        assert!((s.eval(*xi).0 - yi).abs() < 1e-12);
+    }
+    assert!(s.c[0].abs() < 1e-12);
+    let f = Function::Spline(s);
+    let h = 1e-4;
+    let curv = |x: f64| (f.eval(x + h).0 - 2.0 * f.eval(x).0 + f.eval(x - h).0) / (h * h);
+    assert!(curv(3.1 - 2.0 * h).abs() < 1e-2);
+    assert!(CubicSpline::natural(&[0.0, 0.0], &[1.0, 2.0]).is_none());
+}
+
+#[test]
+fn gradient_is_the_derivative_of_the_energy_and_hessian_is_gauss_newton() {
+    for seed in 0..6 {
+        let model = random_model(seed, 6);
+        let proxy = ProxyMap::new(&model, &Profile::default_for(&model)).unwrap();
+        let eval = Evaluator::new(&model, &proxy);
+        let mut ws = EvalWorkspace::new(&model, &proxy);
+        let mut r = common::rng(seed + 50);
+        use rand::RngExt;
+        let p: Vec<f64> = proxy.proxies.iter().map(|px| if px.kind == smocap::model::proxy::ProxyKind::Scale { r.random_range(0.8..1.2) } else { r.random_range(-1.0..1.0) }).collect();
+        // Observations near the model, one marker missing, one with weight 0.
+        let mut obs = markers_at(&model, &proxy.state(&p));
+        for v in obs.iter_mut() {
+            *v += r.random_range(-0.05..0.05);
+        }
+        obs[0] = f64::NAN;
+        let mut weights: Vec<f64> = model.markers.iter().map(|m| m.weight).collect();
+        weights[2] = 0.0;
+        let tref: Vec<f64> = (0..model.ny()).map(|_| r.random_range(-0.5..1.0)).collect();
+        let tw: Vec<f64> = (0..model.ny()).map(|j| if j % 3 == 0 { 0.3 } else { 0.0 }).collect();
+        let frame = FrameProblem { observed: &obs, marker_weights: &weights, tracking_ref: &tref, tracking_weights: &tw };
+        eval.linearize(&p, &frame, &mut ws);
+        let g = ws.gn.g.clone();
+        let hm = ws.gn.h.clone();
+        let h = 1e-6;
+        for k in 0..p.len() {
+            let mut pp = p.clone();
+            let mut pm = p.clone();
+            pp[k] += h;
+            pm[k] -= h;
+            let fd = (eval.energy(&pp, &frame, &mut ws).0 - eval.energy(&pm, &frame, &mut ws).0) / (2.0 * h);
+            assert!((fd - g[k]).abs() <= 1e-6 * g[k].abs().max(1.0), "seed {seed}: g[{k}] {} vs fd {fd}", g[k]);
+        }
+        // H = J_mᵀ W J_m + J_Φᵀ W_t J_Φ from finite-difference residual Jacobians.
+        let np = p.len();
+        let resid = |q: &[f64], ws: &mut EvalWorkspace| -> Vec<f64> {
+            eval.energy(q, &frame, ws);
+            let mut r = Vec::new();
+            for m in 0..model.markers.len() {
+                if weights[m] > 0.0 && !obs[3 * m].is_nan() {
+                    for a in 0..3 {
+                        r.push(weights[m].sqrt() * (ws.kin.markers[3 * m + a] - obs[3 * m + a]));
+                    }
+                }
+            }
+            for j in 0..model.ny() {
+                if tw[j] > 0.0 {
+                    r.push(tw[j].sqrt() * (ws.y[j] - tref[j]));
+                }
+            }
+            r
+        };
+        let cols: Vec<Vec<f64>> = (0..np)
+            .map(|k| {
+                let mut pp = p.clone();
+                let mut pm = p.clone();
+                pp[k] += h;
+                pm[k] -= h;
+                let (a, b) = (resid(&pp, &mut ws), resid(&pm, &mut ws));
+                a.iter().zip(&b).map(|(x, y)| (x - y) / (2.0 * h)).collect()
+            })
+            .collect();
+        for i in 0..np {
+            for j in 0..np {
+                let fd: f64 = cols[i].iter().zip(&cols[j]).map(|(a, b)| a * b).sum();
+                assert!((fd - hm[(i, j)]).abs() <= 1e-5 * fd.abs().max(1.0), "seed {seed}: H[{i},{j}] {} vs {fd}", hm[(i, j)]);
+            }
+        }
+    }
+}
+
+#[test]
+fn proxy_map_jacobian_matches_finite_differences_for_polynomial_couplings() {
+    let model = random_model(3, 7);
+    let nq = model.nq();
+    let names: Vec<String> = model.coordinates[6..nq - 2].iter().take(3).map(|c| c.name.clone()).collect();
+    assert_eq!(names.len(), 3);
+    let text = format!(
+        "[[coupling]]\nproxy = \"spine\"\nrange = [-1.0, 1.0]\ncoordinates = [{}]\ncoefficients = [[0.0, 0.3, 0.05], [0.1, 0.5], [0.0, 0.2, -0.1, 0.02]]\n",
+        names.iter().map(|n| format!("\"{n}\"")).collect::<Vec<_>>().join(", ")
+    );
+    let mut profile = Profile::parse(&text, std::path::Path::new("test.toml")).unwrap();
+    profile.scale_groups = Profile::default_for(&model).scale_groups;
+    let proxy = ProxyMap::new(&model, &profile).unwrap();
+    let k = proxy.proxy_index("spine").unwrap();
+    let mut p = proxy.default_proxies();
+    p[k] = 0.37;
+    let mut y = vec![0.0; proxy.ny()];
+    let mut d = vec![0.0; proxy.terms.len()];
+    proxy.apply(&p, &mut y, &mut d);
+    let h = 1e-6;
+    for (t, term) in proxy.terms.iter().enumerate() {
+        let mut pp = p.clone();
+        let mut pm = p.clone();
+        pp[term.proxy] += h;
+        pm[term.proxy] -= h;
+        let fd = (proxy.state(&pp)[term.y_index] - proxy.state(&pm)[term.y_index]) / (2.0 * h);
+        assert!((fd - d[t]).abs() < 1e-7, "term {t}: {} vs {fd}", d[t]);
+    }
+    let j = model.coordinate_index(&names[1]).unwrap();
+    assert!((y[j] - (0.1 + 0.5 * 0.37)).abs() < 1e-12);
+}
