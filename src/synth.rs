@@ -181,6 +181,7 @@ pub fn synthesize(model: &Model, proxy: &ProxyMap, opt: &SynthOptions) -> Synthe
         frame_numbers: (1..=opt.frames as i64).collect(),
         positions,
         source_units: "m".into(),
+        warnings: Vec::new(),
     };
     Synthetic { trial, truth }
 }

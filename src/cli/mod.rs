@@ -56,12 +56,18 @@ pub(crate) fn load_context(model: Option<&std::path::Path>, profile: Option<&std
     Ok(match model {
         None if profile.is_none() => Context::shipped()?,
         None => {
-            let (m, _) = crate::io::mjcf::parse_mjcf(crate::pipeline::context::SHIPPED_MODEL, "models/fullbody.xml")?;
+            let m = crate::io::mjcf::parse_mjcf(crate::pipeline::context::SHIPPED_MODEL, "models/fullbody.xml")?;
             let path = profile.unwrap_or(std::path::Path::new(""));
             let prof = crate::model::profile::Profile::read(path)?;
             Context::new(m, prof, &path.display().to_string(), "shipped:models/fullbody.xml".into())?
         }
-        Some(m) => Context::from_files(m, profile)?,
+        Some(m) => {
+            let ctx = Context::from_files(m, profile)?;
+            for w in &ctx.warnings {
+                eprintln!("warning: {w}");
+            }
+            ctx
+        }
     })
 }
 

@@ -61,10 +61,13 @@ pub struct EvalWorkspace {
     pub y: Vec<f64>,
     /// `J_Φ` non-zeros, one per proxy-map term.
     pub dphi: Vec<f64>,
-    /// `J_mᵀ` (np × 3M).
-    pub jm_t: DMatrix<f64>,
     pub gn: GaussNewton,
-    v: Vec<f64>,
+    /// Scratch: a marker's compact rows of `J_y` and `J_m`, a body's `H` block (upper,
+    /// row-major) and `g` part.
+    jy_rows: Vec<f64>,
+    row: Vec<f64>,
+    block: Vec<f64>,
+    gpart: Vec<f64>,
 }
 
 impl EvalWorkspace {
@@ -74,9 +77,11 @@ impl EvalWorkspace {
             kin: Workspace::new(model),
             y: vec![0.0; model.ny()],
             dphi: vec![0.0; proxy.terms.len()],
-            jm_t: DMatrix::zeros(np, 3 * model.markers.len()),
             gn: GaussNewton { h: DMatrix::zeros(np, np), g: DVector::zeros(np), energy: 0.0, marker_sq_sum: 0.0, markers_used: 0 },
-            v: vec![0.0; np],
+            jy_rows: vec![0.0; 3 * model.ny()],
+            row: vec![0.0; 3 * np],
+            block: vec![0.0; np * np],
+            gpart: vec![0.0; np],
         }
     }
 }
@@ -120,45 +125,61 @@ impl<'m> Evaluator<'m> {
     /// Gauss–Newton model `(H, g, E)` at `p` into `ws.gn`.
     pub fn linearize(&self, p: &[f64], frame: &FrameProblem<'_>, ws: &mut EvalWorkspace) {
         let (energy, sq, used) = self.energy(p, frame, ws);
-        cpu::jacobian(self.model, &self.layout, &mut ws.kin);
-        let EvalWorkspace { kin, y, dphi, jm_t, gn, v } = ws;
+        let EvalWorkspace { kin, y, dphi, gn, jy_rows, row, block, gpart } = ws;
         gn.h.fill(0.0);
         gn.g.fill(0.0);
         gn.energy = energy;
         gn.marker_sq_sum = sq;
         gn.markers_used = used;
-        let lay = &self.layout;
-        for (m, &w) in frame.marker_weights.iter().enumerate() {
-            let obs = &frame.observed[3 * m..3 * m + 3];
-            let props = &lay.marker_proxies[m];
-            for a in 0..3 {
-                let col = 3 * m + a;
-                for &k in props {
-                    jm_t[(k, col)] = 0.0;
+        for deps in &self.layout.bodies {
+            let ns = deps.proxies.len();
+            let blk = &mut block[..ns * ns];
+            let gp = &mut gpart[..ns];
+            let mut any = false;
+            for &m in &deps.markers {
+                let w = frame.marker_weights[m];
+                let obs = &frame.observed[3 * m..3 * m + 3];
+                if w <= 0.0 || obs.iter().any(|v| v.is_nan()) {
+                    continue;
                 }
-                for &t in &lay.marker_terms[m] {
-                    let term = &self.proxy.terms[t];
-                    jm_t[(term.proxy, col)] += kin.jy_t[(term.y_index, col)] * dphi[t];
+                if !any {
+                    blk.fill(0.0);
+                    gp.fill(0.0);
+                    any = true;
                 }
-            }
-            if w <= 0.0 || obs[0].is_nan() || obs[1].is_nan() || obs[2].is_nan() {
-                continue;
-            }
-            for a in 0..3 {
-                let col = 3 * m + a;
-                let r = kin.markers[col] - obs[a];
-                for (i, &k) in props.iter().enumerate() {
-                    v[i] = w * jm_t[(k, col)];
+                // Compact rows of J_y over this body's ys, then of J_m = J_y J_Φ over its proxies.
+                let nys = deps.ys.len();
+                let jr = &mut jy_rows[..3 * nys];
+                jr.fill(0.0);
+                cpu::marker_contributions(self.model, kin, m, |j, v| {
+                    let i = 3 * deps.y_slot[j];
+                    jr[i] += v.x;
+                    jr[i + 1] += v.y;
+                    jr[i + 2] += v.z;
+                });
+                let rows = &mut row[..3 * ns];
+                rows.fill(0.0);
+                for &(t, yi, slot) in &deps.terms {
+                    let d = dphi[t];
+                    rows[3 * slot] += jr[3 * yi] * d;
+                    rows[3 * slot + 1] += jr[3 * yi + 1] * d;
+                    rows[3 * slot + 2] += jr[3 * yi + 2] * d;
                 }
-                for (i, &ki) in props.iter().enumerate() {
-                    let vi = v[i];
-                    gn.g[ki] += vi * r;
-                    if vi == 0.0 {
-                        continue;
+                // H_S += w Σ_a c_a c_aᵀ (upper triangle), g_S += w Σ_a c_a r_a; rows interleaved by axis.
+                let r = [kin.markers[3 * m] - obs[0], kin.markers[3 * m + 1] - obs[1], kin.markers[3 * m + 2] - obs[2]];
+                for i in 0..ns {
+                    let ci = [w * rows[3 * i], w * rows[3 * i + 1], w * rows[3 * i + 2]];
+                    gp[i] += ci[0] * r[0] + ci[1] * r[1] + ci[2] * r[2];
+                    for (h, cj) in blk[i * ns + i..(i + 1) * ns].iter_mut().zip(rows[3 * i..3 * ns].chunks_exact(3)) {
+                        *h += ci[0] * cj[0] + ci[1] * cj[1] + ci[2] * cj[2];
                     }
-                    let jrow = jm_t.column(col);
-                    for &kj in &props[i..] {
-                        gn.h[(ki, kj)] += vi * jrow[kj];
+                }
+            }
+            if any {
+                for (i, &ki) in deps.proxies.iter().enumerate() {
+                    gn.g[ki] += gp[i];
+                    for (j, &kj) in deps.proxies.iter().enumerate().skip(i) {
+                        gn.h[(ki, kj)] += blk[i * ns + j];
                     }
                 }
             }
@@ -188,5 +209,17 @@ impl<'m> Evaluator<'m> {
                 gn.h[(r, c)] = gn.h[(c, r)];
             }
         }
+    }
+
+    /// Dense `J_m = J_y J_Φ` (3M × np) at the last evaluation, for inspection and tests.
+    pub fn marker_jacobian(&self, ws: &EvalWorkspace) -> DMatrix<f64> {
+        let nx = ws.kin.jy_t.ncols();
+        let mut jm = DMatrix::zeros(nx, self.proxy.np());
+        for (t, term) in self.proxy.terms.iter().enumerate() {
+            for r in 0..nx {
+                jm[(r, term.proxy)] += ws.kin.jy_t[(term.y_index, r)] * ws.dphi[t];
+            }
+        }
+        jm
     }
 }

@@ -112,50 +112,71 @@ pub fn forward(model: &Model, y: &[f64], ws: &mut Workspace) {
     }
 }
 
-/// Fills `ws.jy_t` with `J_yᵀ` at the state of the last [`forward`] call.
-pub fn jacobian(model: &Model, layout: &Layout, ws: &mut Workspace) {
-    for (m, mk) in model.markers.iter().enumerate() {
-        let x = ws.marker(m);
-        let mut cols = ws.jy_t.columns_mut(3 * m, 3);
-        for &j in &layout.marker_y[m] {
-            cols.row_mut(j).fill(0.0);
-        }
-        let mut add = |j: usize, v: Vector3<f64>| {
-            for a in 0..3 {
-                cols[(j, a)] += v[a];
-            }
-        };
-        for &a in model.chain(mk.body) {
-            let body = &model.bodies[a];
-            if let Some(p) = body.parent {
-                let t_p = body.joint.parent_offset.translation.vector;
-                for k in 0..3 {
-                    add(model.scale_index(p, k), ws.body_rot[p].column(k) * t_p[k]);
-                }
-            }
-            for k in body.joint.motions.clone() {
-                let mo = &model.motions[k];
-                let w = ws.motion_axis[k];
-                if let Some(c) = mo.coordinate {
-                    let d = match mo.kind {
-                        MotionKind::Rotation => w.cross(&(x - ws.motion_origin[k])) * ws.motion_der[k],
-                        MotionKind::Translation => w * (ws.motion_der[k] * ws.motion_sigma[k]),
-                    };
-                    add(c, d);
-                }
-                if let (MotionKind::Translation, Some(wts), Some(p)) = (mo.kind, mo.parent_scale_weights, body.parent) {
-                    for k2 in 0..3 {
-                        add(model.scale_index(p, k2), w * (ws.motion_val[k] * wts[k2]));
-                    }
-                }
-            }
-            let t_c = body.joint.child_offset.translation.vector;
+/// Calls `f(j, ∂x/∂y_j)` for every contribution to the Jacobian of marker `m` (at the state
+/// of the last [`forward`] call); a `y_j` may receive several contributions, to be summed.
+#[inline]
+pub fn marker_contributions(model: &Model, ws: &Workspace, m: usize, mut f: impl FnMut(usize, Vector3<f64>)) {
+    let mk = &model.markers[m];
+    let x = ws.marker(m);
+    for &a in model.chain(mk.body) {
+        let body = &model.bodies[a];
+        if let Some(p) = body.parent {
+            let t_p = body.joint.parent_offset.translation.vector;
+            let r_p = &ws.body_rot[p];
             for k in 0..3 {
-                add(model.scale_index(a, k), -ws.body_rot[a].column(k) * t_c[k]);
+                f(model.scale_index(p, k), r_p.column(k) * t_p[k]);
             }
         }
+        for k in body.joint.motions.clone() {
+            let mo = &model.motions[k];
+            let w = ws.motion_axis[k];
+            if let Some(c) = mo.coordinate {
+                let d = match mo.kind {
+                    MotionKind::Rotation => w.cross(&(x - ws.motion_origin[k])) * ws.motion_der[k],
+                    MotionKind::Translation => w * (ws.motion_der[k] * ws.motion_sigma[k]),
+                };
+                f(c, d);
+            }
+            if let (MotionKind::Translation, Some(wts), Some(p)) = (mo.kind, mo.parent_scale_weights, body.parent) {
+                for k2 in 0..3 {
+                    f(model.scale_index(p, k2), w * (ws.motion_val[k] * wts[k2]));
+                }
+            }
+        }
+        let t_c = body.joint.child_offset.translation.vector;
+        let r_a = &ws.body_rot[a];
         for k in 0..3 {
-            add(model.scale_index(mk.body, k), ws.body_rot[mk.body].column(k) * mk.offset[k]);
+            f(model.scale_index(a, k), -r_a.column(k) * t_c[k]);
         }
     }
+    let r_b = &ws.body_rot[mk.body];
+    for k in 0..3 {
+        f(model.scale_index(mk.body, k), r_b.column(k) * mk.offset[k]);
+    }
+}
+
+/// Fills `ws.jy_t` with `J_yᵀ` at the state of the last [`forward`] call (entries that cannot
+/// be non-zero are left at zero).
+pub fn jacobian(model: &Model, layout: &Layout, ws: &mut Workspace) {
+    let ny = model.ny();
+    let mut jy_t = std::mem::replace(&mut ws.jy_t, DMatrix::zeros(0, 0));
+    for deps in &layout.bodies {
+        for &m in &deps.markers {
+            // Columns 3m, 3m+1, 3m+2 of J_yᵀ are contiguous in column-major storage.
+            let block = &mut jy_t.as_mut_slice()[3 * m * ny..(3 * m + 3) * ny];
+            let (c0, rest) = block.split_at_mut(ny);
+            let (c1, c2) = rest.split_at_mut(ny);
+            for &j in &deps.ys {
+                c0[j] = 0.0;
+                c1[j] = 0.0;
+                c2[j] = 0.0;
+            }
+            marker_contributions(model, ws, m, |j, v| {
+                c0[j] += v.x;
+                c1[j] += v.y;
+                c2[j] += v.z;
+            });
+        }
+    }
+    ws.jy_t = jy_t;
 }

@@ -38,6 +38,8 @@ pub struct Context {
     pub marker_weights: Vec<f64>,
     /// Where the model and profile came from (for reports).
     pub model_source: String,
+    /// What the model importer ignored or approximated.
+    pub warnings: Vec<String>,
 }
 
 impl Context {
@@ -62,12 +64,12 @@ impl Context {
                 }
             })
             .collect();
-        Ok(Context { model, profile, proxy, settings, marker_weights, model_source })
+        Ok(Context { model, profile, proxy, settings, marker_weights, model_source, warnings: Vec::new() })
     }
 
     /// The shipped full-body model with its profile.
     pub fn shipped() -> Result<Context, ContextError> {
-        let (model, _warnings) = mjcf::parse_mjcf(SHIPPED_MODEL, "models/fullbody.xml")?;
+        let model = mjcf::parse_mjcf(SHIPPED_MODEL, "models/fullbody.xml")?;
         let profile = Profile::parse(SHIPPED_PROFILE, Path::new("models/fullbody.toml"))?;
         Context::new(model, profile, "models/fullbody.toml", "shipped:models/fullbody.xml".into())
     }
@@ -75,12 +77,14 @@ impl Context {
     /// A model file (MJCF) with an optional profile file (default: every coordinate free,
     /// every body its own uniform scale).
     pub fn from_files(model_path: &Path, profile_path: Option<&Path>) -> Result<Context, ContextError> {
-        let (model, _warnings) = mjcf::read_mjcf(model_path)?;
+        let (model, warnings) = mjcf::read_mjcf(model_path)?;
         let (profile, name) = match profile_path {
             Some(p) => (Profile::read(p)?, p.display().to_string()),
             None => (Profile::default_for(&model), "<default profile>".to_string()),
         };
-        Context::new(model, profile, &name, model_path.display().to_string())
+        let mut ctx = Context::new(model, profile, &name, model_path.display().to_string())?;
+        ctx.warnings = warnings;
+        Ok(ctx)
     }
 
     /// Evaluator over this context's model and proxy map.

@@ -201,7 +201,8 @@ fn errors_against(ctx: &Context, r: &TrialResult, mean_p: &[f64], scale_k: &[usi
     for (f, p) in r.proxies.iter().enumerate().take(t.coordinates.len()) {
         let y = ctx.proxy.state(p);
         for &(j, tj) in &moved {
-            errs.push((y[j] - t.coordinates[f][tj]).to_degrees().abs());
+            // A rotation off by whole turns is the same pose.
+            errs.push(crate::solve::init::wrap_angle(y[j] - t.coordinates[f][tj]).to_degrees().abs());
         }
     }
     let pose = (!errs.is_empty()).then(|| PoseError {

@@ -79,22 +79,42 @@ pub fn cold_start(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mu
     for &k in &root {
         solver.free[k] = true;
     }
-    // Several headings for the first root rotation proxy, to avoid flipped local minima.
+    // The targets are reachable exactly, so a start that fits them is the answer. Headings for
+    // the first root rotation proxy: as it is, then spread around the circle, to escape flipped
+    // local minima of the Euler decomposition.
     let first_rot = root.iter().copied().find(|&k| eval.proxy.proxies[k].kind == crate::model::proxy::ProxyKind::Rotation);
     let mut best: Option<(f64, Vec<f64>)> = None;
-    let starts = if first_rot.is_some() { 8 } else { 1 };
+    let starts = if first_rot.is_some() { 9 } else { 1 };
     for i in 0..starts {
         let mut trial = p.to_vec();
-        if let Some(k) = first_rot {
-            trial[k] = -std::f64::consts::PI + (i as f64 + 0.5) * std::f64::consts::TAU / starts as f64;
+        if let (Some(k), true) = (first_rot, i > 0) {
+            trial[k] += std::f64::consts::TAU * i as f64 / starts as f64;
+            trial[k] = wrap_angle(trial[k]);
         }
         let stats = solver.solve(&target_frame, &mut trial);
+        let done = stats.rmse_m < 1e-3;
         if best.as_ref().is_none_or(|(e, _)| stats.energy < *e) {
             best = Some((stats.energy, trial));
+        }
+        if done {
+            break;
         }
     }
     solver.free = saved_free;
     if let Some((_, q)) = best {
         p.copy_from_slice(&q);
     }
+    // Unbounded root angles: the representative in (−π, π].
+    for &k in &root {
+        let px = &eval.proxy.proxies[k];
+        if px.kind == crate::model::proxy::ProxyKind::Rotation && px.range.0 <= -std::f64::consts::TAU && px.range.1 >= std::f64::consts::TAU {
+            p[k] = wrap_angle(p[k]);
+        }
+    }
+}
+
+/// The angle equal to `a` modulo 2π in (−π, π].
+pub fn wrap_angle(a: f64) -> f64 {
+    let w = (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+    if w == -std::f64::consts::PI { std::f64::consts::PI } else { w }
 }

@@ -18,10 +18,11 @@ pub enum QpBackend {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum WarmStart {
-    /// The previous frame's solution.
+    /// The previous frame's solution (default: measured 2 iterations median against 3 for
+    /// extrapolation on 2 mm-noise synthetic data at 100 Hz, where extrapolating amplifies noise).
+    #[default]
     Previous,
     /// Linear extrapolation of the two previous solutions (clamped to the proxy ranges).
-    #[default]
     Extrapolate,
 }
 
@@ -33,7 +34,10 @@ pub struct SolverSettings {
     pub max_iterations: u32,
     /// Stop when the marker RMSE falls below this (m). Default 1e-6.
     pub residual_tol_m: f64,
-    /// Stop when an accepted step lowers `E` by less than this fraction of `E`. Default 1e-3.
+    /// Stop when an accepted step lowers `E` by less than this fraction of `E`. Default 1e-2:
+    /// at that point the optimisation error left is far below the noise of the estimate itself
+    /// (noise alone leaves `E` a fraction ≈ (3M − np)/3M of the residual energy); noise-free data
+    /// still converge fully through `residual_tol_m`.
     pub rel_decrease_tol: f64,
     /// Stop when the largest step component is below this (proxy units). Default 1e-9.
     pub step_tol: f64,
@@ -74,7 +78,7 @@ impl Default for SolverSettings {
         SolverSettings {
             max_iterations: 20,
             residual_tol_m: 1e-6,
-            rel_decrease_tol: 1e-3,
+            rel_decrease_tol: 1e-2,
             step_tol: 1e-9,
             step_rotation_rad: 0.5,
             step_translation_m: 0.25,

@@ -10,8 +10,8 @@
 mod boxqp;
 mod clarabel_backend;
 
-pub use boxqp::BoxQp;
-pub use clarabel_backend::ClarabelQp;
+pub use boxqp::{BoxQp, BoxQpSettings};
+pub use clarabel_backend::{ClarabelQp, ClarabelQpSettings};
 
 use nalgebra::{DMatrix, DVector};
 
@@ -64,6 +64,59 @@ pub enum QpError {
     Infeasible(String),
     #[error("QP backend {backend} failed: {status}")]
     Backend { backend: &'static str, status: String },
+    /// NaN or infinity where a finite number is required (`what` names the input: "h", "g",
+    /// "a", …; `index` is the flat index into it, column-major for matrices).
+    #[error("QP input {what} has a non-finite entry at index {index}")]
+    NonFinite { what: &'static str, index: usize },
+}
+
+impl QpProblem<'_> {
+    /// Checks shapes, bound consistency and finiteness, returning the number of variables `n`.
+    ///
+    /// `h` (upper triangle only) and `g` must be finite; `lb[i] ≤ ub[i]` with `lb[i] < +∞`
+    /// and `ub[i] > -∞`. Cost `O(n²)`, no allocation.
+    pub fn validate(&self) -> Result<usize, QpError> {
+        let n = self.g.len();
+        let (h_rows, h_cols) = self.h.shape();
+        if h_rows != n || h_cols != n || self.lb.len() != n || self.ub.len() != n {
+            return Err(QpError::Dimensions { h_rows, h_cols, g: n, lb: self.lb.len(), ub: self.ub.len() });
+        }
+        if let Some(index) = self.g.iter().position(|v| !v.is_finite()) {
+            return Err(QpError::NonFinite { what: "g", index });
+        }
+        let h = self.h.as_slice();
+        for j in 0..n {
+            if let Some(i) = h[j * n..=j * n + j].iter().position(|v| !v.is_finite()) {
+                return Err(QpError::NonFinite { what: "h", index: j * n + i });
+            }
+        }
+        for (index, (&lb, &ub)) in self.lb.iter().zip(self.ub.iter()).enumerate() {
+            // `!(lb <= ub)` also catches NaN bounds.
+            if !(lb <= ub) {
+                return Err(QpError::InconsistentBounds { index, lb, ub });
+            }
+            if lb == f64::INFINITY || ub == f64::NEG_INFINITY {
+                return Err(QpError::Infeasible(format!("variable {index} has bounds [{lb}, {ub}]")));
+            }
+        }
+        Ok(n)
+    }
+
+    /// `½ xᵀ H x + gᵀ x`, reading only the upper triangle of `H`; NaN if `x` has the wrong length.
+    pub fn objective(&self, x: &DVector<f64>) -> f64 {
+        let n = self.g.len();
+        if x.len() != n || self.h.shape() != (n, n) {
+            return f64::NAN;
+        }
+        let h = self.h.as_slice();
+        let mut quad = 0.0;
+        for j in 0..n {
+            let col = &h[j * n..j * n + j];
+            let off: f64 = col.iter().zip(x.iter()).map(|(a, b)| a * b).sum();
+            quad += x[j] * (2.0 * off + h[j * n + j] * x[j]);
+        }
+        0.5 * quad + self.g.dot(x)
+    }
 }
 
 /// A QP backend. Implementations keep their workspace between calls so that the per-frame
