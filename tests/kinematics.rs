@@ -175,3 +175,45 @@ fn proxy_map_jacobian_matches_finite_differences_for_polynomial_couplings() {
     let j = model.coordinate_index(&names[1]).unwrap();
     assert!((y[j] - (0.1 + 0.5 * 0.37)).abs() < 1e-12);
 }
+
+#[test]
+fn batched_evaluation_equals_frame_by_frame_evaluation() {
+    use smocap::kinematics::batch::{energy_batch, linearize_batch};
+    let model = random_model(9, 6);
+    let proxy = ProxyMap::new(&model, &Profile::default_for(&model)).unwrap();
+    let eval = Evaluator::new(&model, &proxy);
+    let weights: Vec<f64> = model.markers.iter().map(|m| m.weight).collect();
+    let zeros = vec![0.0; model.ny()];
+    let ps: Vec<Vec<f64>> = (0..40).map(|f| proxy.default_proxies().iter().map(|v| v + 0.01 * f as f64).collect()).collect();
+    let obs: Vec<Vec<f64>> = ps.iter().map(|p| markers_at(&model, &proxy.state(p)).iter().map(|v| v + 0.003).collect()).collect();
+    let frames: Vec<FrameProblem> = obs.iter().map(|o| FrameProblem { observed: o, marker_weights: &weights, tracking_ref: &zeros, tracking_weights: &zeros }).collect();
+    let batch = linearize_batch(&eval, &frames, &ps);
+    let energies = energy_batch(&eval, &frames, &ps);
+    let mut ws = EvalWorkspace::new(&model, &proxy);
+    for f in 0..frames.len() {
+        eval.linearize(&ps[f], &frames[f], &mut ws);
+        assert_eq!(batch[f].h, ws.gn.h);
+        assert_eq!(batch[f].g, ws.gn.g);
+        assert_eq!(batch[f].energy, ws.gn.energy);
+        assert_eq!(energies[f], ws.gn.energy);
+    }
+}
+
+#[test]
+fn dense_marker_jacobian_is_jy_times_jphi() {
+    let model = random_model(4, 5);
+    let proxy = ProxyMap::new(&model, &Profile::default_for(&model)).unwrap();
+    let eval = Evaluator::new(&model, &proxy);
+    let mut ws = EvalWorkspace::new(&model, &proxy);
+    let p = proxy.default_proxies();
+    let obs = markers_at(&model, &proxy.state(&p));
+    let weights: Vec<f64> = vec![1.0; model.markers.len()];
+    let zeros = vec![0.0; model.ny()];
+    let frame = FrameProblem { observed: &obs, marker_weights: &weights, tracking_ref: &zeros, tracking_weights: &zeros };
+    eval.linearize(&p, &frame, &mut ws);
+    cpu::jacobian(&model, &eval.layout, &mut ws.kin);
+    let jm = eval.marker_jacobian(&ws);
+    // H = J_mᵀ J_m with unit weights and no tracking.
+    let h = jm.transpose() * &jm;
+    assert!((h - &ws.gn.h).amax() < 1e-10);
+}

@@ -5,6 +5,7 @@
 //! The CPU implementation ([`cpu`]) is the reference; derivations are in `docs/KINEMATICS.md`.
 
 pub mod assembly;
+pub mod batch;
 pub mod cpu;
 pub mod layout;
 

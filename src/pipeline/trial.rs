@@ -8,6 +8,7 @@ use crate::io::MarkerTrial;
 use crate::kinematics::assembly::FrameProblem;
 use crate::model::proxy::ProxyKind;
 use crate::solve::init::cold_start;
+use crate::solve::calibrate::track;
 use crate::solve::{calibrate, make_qp, Calibration, FrameSolver, FrameStats, FrameStatus, WarmStart};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -88,27 +89,38 @@ pub fn calibrate_subject(ctx: &Context, trials: &[(&str, &MarkerTrial)]) -> Resu
     let settings = &ctx.settings;
     let stride = 3 * ctx.model.markers.len();
     let per_trial = settings.calibration_frames.div_ceil(trials.len().max(1));
+    let eval = ctx.evaluator();
+    let zeros = vec![0.0; ctx.model.ny()];
+    let template = FrameProblem { observed: &[], marker_weights: &ctx.marker_weights, tracking_ref: &zeros, tracking_weights: &zeros };
+    let mut solver = FrameSolver::new(&eval, settings.clone(), make_qp(settings.qp));
+    let p0 = ctx.proxy.default_proxies();
     let mut pooled: Vec<f64> = Vec::new();
+    let mut starts: Vec<Vec<f64>> = Vec::new();
     for (name, t) in trials {
         let (map, _, _) = match_markers(ctx, t);
         if map.iter().all(Option::is_none) {
             return Err(no_match(ctx, name, t));
         }
         let o = observations(t, &map);
-        for f in calibration_frames(&o, stride, per_trial, settings.min_markers) {
+        let chosen = calibration_frames(&o, stride, per_trial, settings.min_markers);
+        let Some(&last) = chosen.last() else { continue };
+        // Track from the first frame to the last chosen one so that every chosen frame starts
+        // from a pose continuous with the motion (a cold start far into a motion can land in a
+        // wrong local minimum).
+        let first = (0..=last).find(|&f| observed_count(&o[f * stride..(f + 1) * stride]) >= settings.min_markers).unwrap_or(0);
+        let slices: Vec<&[f64]> = (first..=last).map(|f| &o[f * stride..(f + 1) * stride]).collect();
+        let tracked = track(&mut solver, &slices, &template, &p0);
+        for f in chosen {
             pooled.extend_from_slice(&o[f * stride..(f + 1) * stride]);
+            starts.push(tracked[f - first].clone());
         }
     }
     if pooled.is_empty() {
         let trial = trials.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ");
         return Err(TrialError::NothingToCalibrate { trial, min: settings.min_markers });
     }
-    let eval = ctx.evaluator();
-    let zeros = vec![0.0; ctx.model.ny()];
-    let template = FrameProblem { observed: &[], marker_weights: &ctx.marker_weights, tracking_ref: &zeros, tracking_weights: &zeros };
-    let mut solver = FrameSolver::new(&eval, settings.clone(), make_qp(settings.qp));
     let slices: Vec<&[f64]> = pooled.chunks(stride).collect();
-    Ok(calibrate(&mut solver, &slices, &template, &ctx.proxy.default_proxies()))
+    Ok(calibrate(&mut solver, &slices, &template, &p0, &starts))
 }
 
 fn no_match(ctx: &Context, name: &str, trial: &MarkerTrial) -> TrialError {
@@ -146,6 +158,12 @@ pub fn solve_trial(ctx: &Context, name: &str, trial: &MarkerTrial, calibration: 
         track_w[t.y_index] = if kind == ProxyKind::Scale { settings.scale_tracking_weight } else { settings.pose_prior_weight };
     }
 
+    let mut neutral = ctx.proxy.default_proxies();
+    for (k, px) in ctx.proxy.proxies.iter().enumerate() {
+        if px.kind == ProxyKind::Scale {
+            neutral[k] = calibration.proxies[k];
+        }
+    }
     // Segments solved in parallel.
     let n = trial.n_frames();
     let threads = threads.max(1);
@@ -167,7 +185,8 @@ pub fn solve_trial(ctx: &Context, name: &str, trial: &MarkerTrial, calibration: 
                     let mut p = match (&prev, &prev2, settings.warm_start) {
                         (Some(p1), Some(p2), WarmStart::Extrapolate) => p1.iter().zip(p2).map(|(x1, x2)| 2.0 * x1 - x2).collect(),
                         (Some(p1), _, _) => p1.clone(),
-                        (None, _, _) => calibration.proxies.clone(),
+                        // Cold start: the neutral pose at the calibrated morphology.
+                        (None, _, _) => neutral.clone(),
                     };
                     solver.clamp(&mut p);
                     let y_warm = ctx.proxy.state(&p);

@@ -32,8 +32,9 @@ pub struct Calibration {
 }
 
 /// Calibrates the scale proxies on `frames` (observed marker arrays, `3·marker + axis`, NaN gaps).
-/// `frame_template` supplies weights and tracking arrays (its `observed` is ignored).
-pub fn calibrate(solver: &mut FrameSolver<'_>, frames: &[&[f64]], frame_template: &FrameProblem<'_>, p0: &[f64]) -> Calibration {
+/// `frame_template` supplies weights and tracking arrays (its `observed` is ignored). `starts`
+/// gives each frame's initial proxies (see [`track`]); their scale entries are replaced by `p0`'s.
+pub fn calibrate(solver: &mut FrameSolver<'_>, frames: &[&[f64]], frame_template: &FrameProblem<'_>, p0: &[f64], starts: &[Vec<f64>]) -> Calibration {
     let eval = solver.eval;
     let proxy = eval.proxy;
     let np = proxy.np();
@@ -45,10 +46,12 @@ pub fn calibrate(solver: &mut FrameSolver<'_>, frames: &[&[f64]], frame_template
 
     // Per-frame poses at the starting scale.
     let mut poses: Vec<Vec<f64>> = Vec::with_capacity(frames.len());
-    for obs in frames {
+    for (obs, start) in frames.iter().zip(starts) {
         let fp = FrameProblem { observed: obs, ..*frame_template };
-        let mut p = p0.to_vec();
-        cold_start(solver, &fp, &mut p);
+        let mut p = start.clone();
+        for &k in &scale {
+            p[k] = p0[k];
+        }
         let saved = std::mem::replace(&mut solver.free, (0..np).map(|k| proxy.proxies[k].kind != ProxyKind::Scale).collect());
         solver.solve(&fp, &mut p);
         solver.free = saved;
@@ -150,4 +153,27 @@ pub fn calibrate(solver: &mut FrameSolver<'_>, frames: &[&[f64]], frame_template
         proxies[k] = shared[i];
     }
     Calibration { proxies, frames: frames.len(), iterations, rmse_m: rmse }
+}
+
+/// Pose-only tracking through `frames` in order at the scale of `p0`, warm-started from frame to
+/// frame (the first frame, and any after a gap, cold-started): returns the proxies at each frame.
+/// This is how calibration frames far apart in a motion get good initial poses.
+pub fn track(solver: &mut FrameSolver<'_>, frames: &[&[f64]], frame_template: &FrameProblem<'_>, p0: &[f64]) -> Vec<Vec<f64>> {
+    let proxy = solver.eval.proxy;
+    let saved = std::mem::replace(&mut solver.free, proxy.proxies.iter().map(|p| p.kind != ProxyKind::Scale).collect());
+    let mut out = Vec::with_capacity(frames.len());
+    let mut p = p0.to_vec();
+    let mut warm = false;
+    for obs in frames {
+        let fp = FrameProblem { observed: obs, ..*frame_template };
+        if !warm {
+            p = p0.to_vec();
+            cold_start(solver, &fp, &mut p);
+        }
+        let st = solver.solve(&fp, &mut p);
+        warm = st.status != super::FrameStatus::TooFewMarkers;
+        out.push(p.clone());
+    }
+    solver.free = saved;
+    out
 }

@@ -43,8 +43,72 @@ pub fn kabsch(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> Option<(Matrix3<f64>, V
 }
 
 /// Initial proxies for `frame`, starting from `p` (whose scale part is kept): the root is
-/// placed rigidly on the observed markers, the other pose proxies keep their values.
+/// placed rigidly on the observed markers ([`place_root`]), then root-to-leaf sweeps fit each
+/// joint to the markers of its subtree ([`sweep`]).
 pub fn cold_start(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mut [f64]) {
+    place_root(solver, frame, p);
+    for _ in 0..2 {
+        sweep(solver, frame, p);
+    }
+}
+
+/// One root-to-leaf Gauss–Seidel sweep of local fits (METHOD.md's pre-solve): for each joint in
+/// topological order, its pose proxies are fitted to the markers of its subtree, everything
+/// else held. Proxies driving several joints (a coupled spine) are fitted at their first joint.
+pub fn sweep(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mut [f64]) {
+    let eval = solver.eval;
+    let model = eval.model;
+    let proxy = eval.proxy;
+    let saved_free = std::mem::take(&mut solver.free);
+    let mut done = vec![false; p.len()];
+    let mut weights = vec![0.0; model.markers.len()];
+    for (b, body) in model.bodies.iter().enumerate() {
+        if body.parent.is_none() {
+            continue;
+        }
+        let mut free = vec![false; p.len()];
+        let mut any = false;
+        for mo in &model.motions[body.joint.motions.clone()] {
+            if let Some(c) = mo.coordinate {
+                for t in proxy.y_terms[c].clone() {
+                    let k = proxy.terms[t].proxy;
+                    if !done[k] && proxy.proxies[k].kind != crate::model::proxy::ProxyKind::Scale {
+                        free[k] = true;
+                        done[k] = true;
+                        any = true;
+                    }
+                }
+            }
+        }
+        if !any {
+            continue;
+        }
+        // First the body's own markers (when they can orient it), then its whole subtree: a
+        // distal segment at a neutral pose would otherwise pull an axial rotation the wrong way.
+        solver.free = free;
+        let min_markers = std::mem::replace(&mut solver.settings.min_markers, 1);
+        for subtree in [false, true] {
+            let mut observed = 0;
+            for (m, mk) in model.markers.iter().enumerate() {
+                let counts = if subtree { model.is_ancestor(b, mk.body) } else { mk.body == b };
+                weights[m] = if counts { frame.marker_weights[m] } else { 0.0 };
+                if weights[m] > 0.0 && !frame.observed[3 * m].is_nan() {
+                    observed += 1;
+                }
+            }
+            if observed < if subtree { 1 } else { 2 } {
+                continue;
+            }
+            let local = FrameProblem { marker_weights: &weights, ..*frame };
+            solver.solve(&local, p);
+        }
+        solver.settings.min_markers = min_markers;
+    }
+    solver.free = saved_free;
+}
+
+/// Places the root body by a rigid fit of the model markers at `p` to the observed ones.
+pub fn place_root(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mut [f64]) {
     let eval = solver.eval;
     let model = eval.model;
     // Model markers at p, paired with observations.
@@ -79,6 +143,8 @@ pub fn cold_start(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mu
     for &k in &root {
         solver.free[k] = true;
     }
+    // The subject may be metres away from the origin: no step box for this exact rigid fit.
+    let saved_multiplier = std::mem::replace(&mut solver.step_multiplier, 1e6);
     // The targets are reachable exactly, so a start that fits them is the answer. Headings for
     // the first root rotation proxy: as it is, then spread around the circle, to escape flipped
     // local minima of the Euler decomposition.
@@ -101,6 +167,7 @@ pub fn cold_start(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mu
         }
     }
     solver.free = saved_free;
+    solver.step_multiplier = saved_multiplier;
     if let Some((_, q)) = best {
         p.copy_from_slice(&q);
     }

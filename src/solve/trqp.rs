@@ -63,6 +63,8 @@ pub struct FrameSolver<'e> {
     hi: Vec<f64>,
     /// Proxies the solver may move; the others keep their value (all true by default).
     pub free: Vec<bool>,
+    /// Multiplies the step box (1 by default; the cold start widens it to travel far).
+    pub step_multiplier: f64,
 }
 
 impl<'e> FrameSolver<'e> {
@@ -92,6 +94,7 @@ impl<'e> FrameSolver<'e> {
             lo: eval.proxy.proxies.iter().map(|p| p.range.0).collect(),
             hi: eval.proxy.proxies.iter().map(|p| p.range.1).collect(),
             free: vec![true; np],
+            step_multiplier: 1.0,
             settings,
         }
     }
@@ -140,7 +143,7 @@ impl<'e> FrameSolver<'e> {
                 let d = lambda * gn.h[(k, k)].max(s.damping_floor);
                 self.damp[k] = d;
                 self.h[(k, k)] += d;
-                let b = if self.free[k] { self.step_box[k] * shrink } else { 0.0 };
+                let b = if self.free[k] { self.step_box[k] * shrink * self.step_multiplier } else { 0.0 };
                 self.lb[k] = (-b).max(self.lo[k] - p[k]);
                 self.ub[k] = b.min(self.hi[k] - p[k]);
             }

@@ -18,7 +18,8 @@
 use super::{LinearConstraints, QpError, QpProblem, QpSolver, QpStats, QpStatus};
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
-    DataUpdateError, DefaultSettings, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus, SupportedConeT, ZeroConeT,
+    DataUpdateError, DefaultSettings, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus, SupportedConeT,
+    ZeroConeT,
 };
 use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
@@ -125,7 +126,15 @@ pub struct ClarabelQp {
 impl ClarabelQp {
     /// Box constraints only.
     pub fn new(settings: ClarabelQpSettings) -> Self {
-        Self { settings, constraints: None, built: None, sides: Vec::new(), p_vals: Vec::new(), q: Vec::new(), b: Vec::new() }
+        Self {
+            settings,
+            constraints: None,
+            built: None,
+            sides: Vec::new(),
+            p_vals: Vec::new(),
+            q: Vec::new(),
+            b: Vec::new(),
+        }
     }
 
     /// Box constraints plus `constraints` (checked against the problem at each solve).
@@ -156,7 +165,7 @@ impl ClarabelQp {
             return Err(QpError::NonFinite { what: "a", index });
         }
         for (k, (&lo, &hi)) in c.lo.iter().zip(c.hi.iter()).enumerate() {
-            if !(lo <= hi) || lo == f64::INFINITY || hi == f64::NEG_INFINITY {
+            if lo.is_nan() || hi.is_nan() || lo > hi || lo == f64::INFINITY || hi == f64::NEG_INFINITY {
                 return Err(QpError::Infeasible(format!("constraint {k} has bounds [{lo}, {hi}]")));
             }
         }

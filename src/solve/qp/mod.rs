@@ -81,18 +81,23 @@ impl QpProblem<'_> {
         if h_rows != n || h_cols != n || self.lb.len() != n || self.ub.len() != n {
             return Err(QpError::Dimensions { h_rows, h_cols, g: n, lb: self.lb.len(), ub: self.ub.len() });
         }
-        if let Some(index) = self.g.iter().position(|v| !v.is_finite()) {
+        // Branch-free scans (they vectorise); locate the offender only on failure.
+        let all_finite = |v: &[f64]| !v.iter().fold(false, |bad, x| bad | !x.is_finite());
+        let g = self.g.as_slice();
+        if !all_finite(g) {
+            let index = g.iter().position(|v| !v.is_finite()).unwrap_or(0);
             return Err(QpError::NonFinite { what: "g", index });
         }
         let h = self.h.as_slice();
         for j in 0..n {
-            if let Some(i) = h[j * n..=j * n + j].iter().position(|v| !v.is_finite()) {
+            let col = &h[j * n..=j * n + j];
+            if !all_finite(col) {
+                let i = col.iter().position(|v| !v.is_finite()).unwrap_or(0);
                 return Err(QpError::NonFinite { what: "h", index: j * n + i });
             }
         }
         for (index, (&lb, &ub)) in self.lb.iter().zip(self.ub.iter()).enumerate() {
-            // `!(lb <= ub)` also catches NaN bounds.
-            if !(lb <= ub) {
+            if lb.is_nan() || ub.is_nan() || lb > ub {
                 return Err(QpError::InconsistentBounds { index, lb, ub });
             }
             if lb == f64::INFINITY || ub == f64::NEG_INFINITY {
