@@ -15,7 +15,15 @@ fn kinematics(c: &mut Criterion) {
     let ctx = Context::shipped().expect("shipped model");
     let eval = ctx.evaluator();
     let frames = 1024;
-    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames, seed: 5, ..SynthOptions::default() });
+    let s = synthesize(
+        &ctx.model,
+        &ctx.proxy,
+        &SynthOptions {
+            frames,
+            seed: 5,
+            ..SynthOptions::default()
+        },
+    );
     let ps = &s.truth.proxies;
     let obs = &s.trial.positions;
     let stride = 3 * ctx.model.markers.len();
@@ -24,15 +32,24 @@ fn kinematics(c: &mut Criterion) {
     let mut g = c.benchmark_group("kinematics_one_thread");
     g.throughput(Throughput::Elements(1));
     let y = ctx.proxy.state(&ps[10]);
-    g.bench_function("forward", |b| b.iter(|| cpu::forward(&ctx.model, black_box(&y), &mut ws.kin)));
+    g.bench_function("forward", |b| {
+        b.iter(|| cpu::forward(&ctx.model, black_box(&y), &mut ws.kin))
+    });
     g.bench_function("forward_jacobian", |b| {
         b.iter(|| {
             cpu::forward(&ctx.model, black_box(&y), &mut ws.kin);
             cpu::jacobian(&ctx.model, &eval.layout, &mut ws.kin);
         })
     });
-    let frame = FrameProblem { observed: &obs[10 * stride..11 * stride], marker_weights: &ctx.marker_weights, tracking_ref: &zeros, tracking_weights: &zeros };
-    g.bench_function("linearize_h_g", |b| b.iter(|| eval.linearize(black_box(&ps[10]), &frame, &mut ws)));
+    let frame = FrameProblem {
+        observed: &obs[10 * stride..11 * stride],
+        marker_weights: &ctx.marker_weights,
+        tracking_ref: &zeros,
+        tracking_weights: &zeros,
+    };
+    g.bench_function("linearize_h_g", |b| {
+        b.iter(|| eval.linearize(black_box(&ps[10]), &frame, &mut ws))
+    });
     g.finish();
 
     let mut g = c.benchmark_group("kinematics_batch_rayon");
@@ -43,7 +60,10 @@ fn kinematics(c: &mut Criterion) {
             (0..frames).into_par_iter().for_each_init(
                 || EvalWorkspace::new(&ctx.model, &ctx.proxy),
                 |ws, f| {
-                    let frame = FrameProblem { observed: &obs[f * stride..(f + 1) * stride], ..frame };
+                    let frame = FrameProblem {
+                        observed: &obs[f * stride..(f + 1) * stride],
+                        ..frame
+                    };
                     eval.linearize(&ps[f], &frame, ws);
                     black_box(ws.gn.energy);
                 },

@@ -14,7 +14,15 @@ use std::hint::black_box;
 fn solve_sequence(c: &mut Criterion) {
     let ctx = Context::shipped().expect("shipped model");
     let frames = 200;
-    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames, seed: 3, ..SynthOptions::default() });
+    let s = synthesize(
+        &ctx.model,
+        &ctx.proxy,
+        &SynthOptions {
+            frames,
+            seed: 3,
+            ..SynthOptions::default()
+        },
+    );
     let cal = calibrate_subject(&ctx, &[("bench", &s.trial)]).expect("calibration");
     let (map, _, _) = smocap::pipeline::trial::match_markers(&ctx, &s.trial);
     let obs = smocap::pipeline::trial::observations(&s.trial, &map);
@@ -24,14 +32,23 @@ fn solve_sequence(c: &mut Criterion) {
     let y_cal = ctx.proxy.state(&cal.proxies);
     let mut tw = vec![0.0; ny];
     for t in &ctx.proxy.terms {
-        tw[t.y_index] = if ctx.proxy.proxies[t.proxy].kind == ProxyKind::Scale { ctx.settings.scale_tracking_weight } else { 0.0 };
+        tw[t.y_index] = if ctx.proxy.proxies[t.proxy].kind == ProxyKind::Scale {
+            ctx.settings.scale_tracking_weight
+        } else {
+            0.0
+        };
     }
     let mut group = c.benchmark_group("solve_frame");
     group.throughput(Throughput::Elements(frames as u64));
     group.sample_size(20);
     for qp in [QpBackend::Boxqp, QpBackend::Clarabel] {
         let mut solver = FrameSolver::new(&eval, ctx.settings.clone(), make_qp(qp));
-        let first = FrameProblem { observed: &obs[..stride], marker_weights: &ctx.marker_weights, tracking_ref: &y_cal, tracking_weights: &tw };
+        let first = FrameProblem {
+            observed: &obs[..stride],
+            marker_weights: &ctx.marker_weights,
+            tracking_ref: &y_cal,
+            tracking_weights: &tw,
+        };
         let mut p0 = cal.proxies.clone();
         cold_start(&mut solver, &first, &mut p0);
         solver.solve(&first, &mut p0);
@@ -40,7 +57,10 @@ fn solve_sequence(c: &mut Criterion) {
                 let mut p = p0.clone();
                 let mut its = 0;
                 for f in 0..frames {
-                    let frame = FrameProblem { observed: &obs[f * stride..(f + 1) * stride], ..first };
+                    let frame = FrameProblem {
+                        observed: &obs[f * stride..(f + 1) * stride],
+                        ..first
+                    };
                     its += solver.solve(&frame, &mut p).iterations;
                 }
                 black_box(its)

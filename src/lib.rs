@@ -1,3 +1,4 @@
+#![allow(clippy::needless_range_loop)] // index loops read closest to the equations in numerical code
 //! smocap: joint scale–pose canonicalization of marker-based motion capture.
 //!
 //! Data flows through the modules in this order: [`io`] (marker files, model files) →
@@ -5,10 +6,10 @@
 //! Jacobians, Gauss–Newton assembly) → [`solve`] (trust-region QP, QP backends, calibration) →
 //! [`pipeline`] (trials, reports) → the `smocap` command line.
 
+pub mod cli;
 pub mod io;
 pub mod kinematics;
 pub mod model;
 pub mod pipeline;
-pub mod cli;
 pub mod solve;
 pub mod synth;

@@ -38,7 +38,17 @@ pub struct SynthOptions {
 
 impl Default for SynthOptions {
     fn default() -> Self {
-        SynthOptions { frames: 500, rate_hz: 100.0, seed: 1, noise_m: 0.002, misplace_m: 0.0, drift_m: 0.0, dropout: 0.0, scale_spread: 0.1, speed_m_s: 1.0 }
+        SynthOptions {
+            frames: 500,
+            rate_hz: 100.0,
+            seed: 1,
+            noise_m: 0.002,
+            misplace_m: 0.0,
+            drift_m: 0.0,
+            dropout: 0.0,
+            scale_spread: 0.1,
+            speed_m_s: 1.0,
+        }
     }
 }
 
@@ -74,7 +84,11 @@ struct Wave {
 
 impl Wave {
     fn at(&self, t: f64) -> f64 {
-        let s: f64 = self.parts.iter().map(|(a, f, ph)| a * (TAU * f * t + ph).sin()).sum();
+        let s: f64 = self
+            .parts
+            .iter()
+            .map(|(a, f, ph)| a * (TAU * f * t + ph).sin())
+            .sum();
         self.center + self.amp * s
     }
 }
@@ -94,7 +108,10 @@ pub fn synthesize(model: &Model, proxy: &ProxyMap, opt: &SynthOptions) -> Synthe
         let (lo, hi) = px.range;
         let (center, amp) = match px.kind {
             ProxyKind::Scale => {
-                fixed[k] = Some(rng.random_range(1.0 - opt.scale_spread..=1.0 + opt.scale_spread).clamp(lo, hi));
+                fixed[k] = Some(
+                    rng.random_range(1.0 - opt.scale_spread..=1.0 + opt.scale_spread)
+                        .clamp(lo, hi),
+                );
                 (0.0, 0.0)
             }
             _ if lo.is_finite() && hi.is_finite() => {
@@ -108,7 +125,9 @@ pub fn synthesize(model: &Model, proxy: &ProxyMap, opt: &SynthOptions) -> Synthe
         waves.push(Wave { center, amp, parts });
     }
     // Walk forward along x when the model has a root translation named like one.
-    let walk = proxy.proxies.iter().position(|p| p.kind == ProxyKind::Translation && (p.name.ends_with("_tx") || p.name.ends_with("tx")));
+    let walk = proxy.proxies.iter().position(|p| {
+        p.kind == ProxyKind::Translation && (p.name.ends_with("_tx") || p.name.ends_with("tx"))
+    });
 
     let nm = model.markers.len();
     let normal = Normal::new(0.0, 1.0).expect("unit normal");
@@ -119,7 +138,9 @@ pub fn synthesize(model: &Model, proxy: &ProxyMap, opt: &SynthOptions) -> Synthe
             v.map(|c| c / n * opt.misplace_m)
         })
         .collect();
-    let drift: Vec<[(f64, f64); 3]> = (0..nm).map(|_| [0; 3].map(|_| (rng.random_range(0.1..0.5), rng.random_range(0.0..TAU)))).collect();
+    let drift: Vec<[(f64, f64); 3]> = (0..nm)
+        .map(|_| [0; 3].map(|_| (rng.random_range(0.1..0.5), rng.random_range(0.0..TAU))))
+        .collect();
 
     let mut moved = model.clone();
     for (m, mk) in moved.markers.iter_mut().enumerate() {
@@ -137,7 +158,9 @@ pub fn synthesize(model: &Model, proxy: &ProxyMap, opt: &SynthOptions) -> Synthe
     let mean_gap = 8.0;
     for f in 0..opt.frames {
         let t = f as f64 / opt.rate_hz;
-        let p: Vec<f64> = (0..np).map(|k| fixed[k].unwrap_or_else(|| waves[k].at(t))).collect();
+        let p: Vec<f64> = (0..np)
+            .map(|k| fixed[k].unwrap_or_else(|| waves[k].at(t)))
+            .collect();
         let mut p = p;
         if let Some(k) = walk {
             p[k] = default[k] + opt.speed_m_s * t + 0.02 * waves[k].at(t);
@@ -156,7 +179,9 @@ pub fn synthesize(model: &Model, proxy: &ProxyMap, opt: &SynthOptions) -> Synthe
             };
             for a in 0..3 {
                 let (fq, ph) = drift[m][a];
-                let v = ws.markers[3 * m + a] + opt.drift_m * (TAU * fq * t + ph).sin() + opt.noise_m * normal.sample(&mut rng);
+                let v = ws.markers[3 * m + a]
+                    + opt.drift_m * (TAU * fq * t + ph).sin()
+                    + opt.noise_m * normal.sample(&mut rng);
                 positions.push(if missing { f64::NAN } else { v });
             }
         }
@@ -167,8 +192,23 @@ pub fn synthesize(model: &Model, proxy: &ProxyMap, opt: &SynthOptions) -> Synthe
     let truth = Truth {
         model: model.name.clone(),
         options: opt.clone(),
-        scales: proxy.proxies.iter().zip(&fixed).filter_map(|(px, v)| v.map(|v| (px.name.clone(), v))).collect(),
-        body_scales: model.bodies.iter().enumerate().map(|(b, body)| (body.name.clone(), [0, 1, 2].map(|a| y0[model.scale_index(b, a)]))).collect(),
+        scales: proxy
+            .proxies
+            .iter()
+            .zip(&fixed)
+            .filter_map(|(px, v)| v.map(|v| (px.name.clone(), v)))
+            .collect(),
+        body_scales: model
+            .bodies
+            .iter()
+            .enumerate()
+            .map(|(b, body)| {
+                (
+                    body.name.clone(),
+                    [0, 1, 2].map(|a| y0[model.scale_index(b, a)]),
+                )
+            })
+            .collect(),
         coordinate_names: model.coordinates.iter().map(|c| c.name.clone()).collect(),
         coordinates: truth_q,
         proxy_names: proxy.proxies.iter().map(|p| p.name.clone()).collect(),

@@ -16,9 +16,17 @@ fn run(opt: SynthOptions) -> smocap::pipeline::report::TrialReport {
 
 #[test]
 fn noise_free_trial_recovers_joint_angles_and_scales_exactly() {
-    let rep = run(SynthOptions { frames: 120, seed: 11, noise_m: 0.0, ..SynthOptions::default() });
+    let rep = run(SynthOptions {
+        frames: 120,
+        seed: 11,
+        noise_m: 0.0,
+        ..SynthOptions::default()
+    });
     let (pe, se) = (rep.pose_error_deg.unwrap(), rep.scale_error_pct.unwrap());
-    eprintln!("noise-free: pose rmse {:.4}° p90 {:.4}°, scale mean {:.4} % max {:.4} %, it p50 {:?}", pe.rmse, pe.p90, se.mean, se.max, rep.iterations);
+    eprintln!(
+        "noise-free: pose rmse {:.4}° p90 {:.4}°, scale mean {:.4} % max {:.4} %, it p50 {:?}",
+        pe.rmse, pe.p90, se.mean, se.max, rep.iterations
+    );
     assert!(pe.rmse <= 0.05, "pose RMSE {}°", pe.rmse);
     assert!(se.mean <= 0.05, "scale error {} %", se.mean);
 }
@@ -26,7 +34,12 @@ fn noise_free_trial_recovers_joint_angles_and_scales_exactly() {
 #[test]
 fn two_millimetre_noise_keeps_joint_angles_within_a_degree_and_scales_within_a_percent() {
     for seed in [12, 13, 14, 15] {
-        let rep = run(SynthOptions { frames: 300, seed, noise_m: 0.002, ..SynthOptions::default() });
+        let rep = run(SynthOptions {
+            frames: 300,
+            seed,
+            noise_m: 0.002,
+            ..SynthOptions::default()
+        });
         let (pe, se) = (rep.pose_error_deg.unwrap(), rep.scale_error_pct.unwrap());
         let rmse = rep.marker_rmse_mm.unwrap();
         eprintln!("2 mm, seed {seed}: pose rmse {:.3}° p90 {:.3}°, scale mean {:.3} % max {:.3} %, marker rmse p50 {:.2} mm, it {:?}", pe.rmse, pe.p90, se.mean, se.max, rmse.p50, rep.iterations);
@@ -40,7 +53,15 @@ fn two_millimetre_noise_keeps_joint_angles_within_a_degree_and_scales_within_a_p
 #[test]
 fn frames_without_markers_are_reported_and_bridged_while_the_rest_solve() {
     let ctx = Context::shipped().unwrap();
-    let mut s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 60, seed: 4, ..SynthOptions::default() });
+    let mut s = synthesize(
+        &ctx.model,
+        &ctx.proxy,
+        &SynthOptions {
+            frames: 60,
+            seed: 4,
+            ..SynthOptions::default()
+        },
+    );
     let nm = s.trial.n_markers();
     for f in [0usize, 30, 31] {
         for v in &mut s.trial.positions[f * nm * 3..(f + 1) * nm * 3] {
@@ -62,11 +83,24 @@ fn frames_without_markers_are_reported_and_bridged_while_the_rest_solve() {
 #[test]
 fn box_qp_and_clarabel_backends_reach_the_same_frame_solution() {
     let ctx = Context::shipped().unwrap();
-    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 5, seed: 9, ..SynthOptions::default() });
+    let s = synthesize(
+        &ctx.model,
+        &ctx.proxy,
+        &SynthOptions {
+            frames: 5,
+            seed: 9,
+            ..SynthOptions::default()
+        },
+    );
     let eval = ctx.evaluator();
     let stride = 3 * ctx.model.markers.len();
     let zeros = vec![0.0; ctx.model.ny()];
-    let frame = FrameProblem { observed: &s.trial.positions[2 * stride..3 * stride], marker_weights: &ctx.marker_weights, tracking_ref: &zeros, tracking_weights: &zeros };
+    let frame = FrameProblem {
+        observed: &s.trial.positions[2 * stride..3 * stride],
+        marker_weights: &ctx.marker_weights,
+        tracking_ref: &zeros,
+        tracking_weights: &zeros,
+    };
     let mut out = Vec::new();
     for qp in [QpBackend::Boxqp, QpBackend::Clarabel] {
         let mut settings = ctx.settings.clone();
@@ -80,7 +114,10 @@ fn box_qp_and_clarabel_backends_reach_the_same_frame_solution() {
         out.push((st.energy, p));
     }
     let (e0, e1) = (out[0].0, out[1].0);
-    assert!((e0 - e1).abs() <= 1e-6 * e0.max(1e-12), "energies {e0} vs {e1}");
+    assert!(
+        (e0 - e1).abs() <= 1e-6 * e0.max(1e-12),
+        "energies {e0} vs {e1}"
+    );
     for (a, b) in out[0].1.iter().zip(&out[1].1) {
         assert!((a - b).abs() < 1e-3, "{a} vs {b}");
     }
@@ -89,7 +126,16 @@ fn box_qp_and_clarabel_backends_reach_the_same_frame_solution() {
 #[test]
 fn cold_start_finds_a_subject_facing_backwards() {
     let ctx = Context::shipped().unwrap();
-    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 3, seed: 21, noise_m: 0.0, ..SynthOptions::default() });
+    let s = synthesize(
+        &ctx.model,
+        &ctx.proxy,
+        &SynthOptions {
+            frames: 3,
+            seed: 21,
+            noise_m: 0.0,
+            ..SynthOptions::default()
+        },
+    );
     let eval = ctx.evaluator();
     let stride = 3 * ctx.model.markers.len();
     // Rotate the observed markers by 180° about the vertical (z) axis.
@@ -99,7 +145,12 @@ fn cold_start_finds_a_subject_facing_backwards() {
         c[1] = -c[1];
     }
     let y_truth = ctx.proxy.state(&s.truth.proxies[0]);
-    let frame = FrameProblem { observed: &obs, marker_weights: &ctx.marker_weights, tracking_ref: &y_truth, tracking_weights: &vec![0.0; ctx.model.ny()] };
+    let frame = FrameProblem {
+        observed: &obs,
+        marker_weights: &ctx.marker_weights,
+        tracking_ref: &y_truth,
+        tracking_weights: &vec![0.0; ctx.model.ny()],
+    };
     let mut solver = FrameSolver::new(&eval, ctx.settings.clone(), make_qp(QpBackend::Boxqp));
     let mut p = ctx.proxy.default_proxies();
     for (k, px) in ctx.proxy.proxies.iter().enumerate() {

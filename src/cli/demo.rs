@@ -23,7 +23,12 @@ pub struct DemoArgs {
 pub fn run(a: DemoArgs) -> anyhow::Result<u8> {
     let ctx = Context::shipped()?;
     let threads = a.threads.unwrap_or_else(super::default_threads).max(1);
-    let opt = SynthOptions { frames: a.frames, seed: a.seed, noise_m: a.noise_mm * 1e-3, ..SynthOptions::default() };
+    let opt = SynthOptions {
+        frames: a.frames,
+        seed: a.seed,
+        noise_m: a.noise_mm * 1e-3,
+        ..SynthOptions::default()
+    };
     println!(
         "smocap demo: shipped model '{}' ({} coordinates, {} bodies, {} markers, {} proxies), {} synthetic frames at {} Hz, {} mm noise, seed {}",
         ctx.model.name,
@@ -39,7 +44,12 @@ pub fn run(a: DemoArgs) -> anyhow::Result<u8> {
     let s = synthesize(&ctx.model, &ctx.proxy, &opt);
     let t0 = std::time::Instant::now();
     let cal = calibrate_subject(&ctx, &[("demo", &s.trial)])?;
-    println!("calibrated on {} frames in {:.1} ms (marker RMSE {:.2} mm)", cal.frames, t0.elapsed().as_secs_f64() * 1e3, cal.rmse_m * 1e3);
+    println!(
+        "calibrated on {} frames in {:.1} ms (marker RMSE {:.2} mm)",
+        cal.frames,
+        t0.elapsed().as_secs_f64() * 1e3,
+        cal.rmse_m * 1e3
+    );
     let r = solve_trial(&ctx, "demo", &s.trial, &cal, threads)?;
     let mut report = Report::new(&ctx, threads);
     report.push(trial_report(&ctx, &r, Some(&s.truth)));
@@ -48,6 +58,9 @@ pub fn run(a: DemoArgs) -> anyhow::Result<u8> {
     if let (Some(pe), Some(se)) = (t.pose_error_deg, t.scale_error_pct) {
         println!("against the truth: joint angle RMSE {:.3}° (p90 {:.3}°), scale error mean {:.3} % (max {:.3} %)", pe.rmse, pe.p90, se.mean, se.max);
     }
-    println!("{} threads; {:.0} frames/s wall", threads, report.totals.frames_per_s);
+    println!(
+        "{} threads; {:.0} frames/s wall",
+        threads, report.totals.frames_per_s
+    );
     Ok(0)
 }

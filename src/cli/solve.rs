@@ -44,7 +44,12 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
     }
     let threads = a.threads.unwrap_or_else(super::default_threads).max(1);
     let truth: Option<Truth> = match &a.truth {
-        Some(p) => Some(serde_json::from_str(&std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?).with_context(|| format!("parsing truth {}", p.display()))?),
+        Some(p) => Some(
+            serde_json::from_str(
+                &std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?,
+            )
+            .with_context(|| format!("parsing truth {}", p.display()))?,
+        ),
         None => None,
     };
     let static_trial = match &a.static_trial {
@@ -60,11 +65,16 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
             Err(e) => report.push(Report::failed(&name, e.to_string())),
         }
     }
-    let calibration_input: Vec<(&str, &crate::io::MarkerTrial)> = match (&a.static_trial, &static_trial) {
-        (Some(p), Some(st)) => vec![(p.to_str().unwrap_or("static"), st)],
-        _ => loaded.iter().map(|(n, t)| (n.as_str(), t)).collect(),
+    let calibration_input: Vec<(&str, &crate::io::MarkerTrial)> =
+        match (&a.static_trial, &static_trial) {
+            (Some(p), Some(st)) => vec![(p.to_str().unwrap_or("static"), st)],
+            _ => loaded.iter().map(|(n, t)| (n.as_str(), t)).collect(),
+        };
+    let calibration = if calibration_input.is_empty() {
+        None
+    } else {
+        Some(calibrate_subject(&ctx, &calibration_input))
     };
-    let calibration = if calibration_input.is_empty() { None } else { Some(calibrate_subject(&ctx, &calibration_input)) };
     for (name, t) in &loaded {
         let result = match &calibration {
             Some(Ok(c)) => solve_trial(&ctx, name, t, c, threads).map_err(|e| e.to_string()),
@@ -83,13 +93,22 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
     }
     print!("{}", report.table());
     if let Some(path) = &a.report_json {
-        std::fs::write(path, serde_json::to_string_pretty(&report)?).with_context(|| format!("writing {}", path.display()))?;
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("writing {}", path.display()))?;
     }
     let failed = report.trials.iter().filter(|t| t.status != "ok").count();
     if failed > 0 {
         eprintln!("{failed} of {} trials failed", report.trials.len());
         if failed == report.trials.len() {
-            anyhow::bail!("every trial failed: {}", report.trials.iter().filter_map(|t| t.error.clone()).collect::<Vec<_>>().join("; "));
+            anyhow::bail!(
+                "every trial failed: {}",
+                report
+                    .trials
+                    .iter()
+                    .filter_map(|t| t.error.clone())
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            );
         }
         return Ok(super::EXIT_SOME_FAILED);
     }

@@ -108,7 +108,10 @@ pub struct Profile {
 #[derive(Debug, thiserror::Error)]
 pub enum ProfileError {
     #[error("cannot read profile {path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("profile {path}: {message}")]
     Parse { path: PathBuf, message: String },
 }
@@ -116,13 +119,19 @@ pub enum ProfileError {
 impl Profile {
     /// Reads a profile from a TOML file.
     pub fn read(path: &Path) -> Result<Profile, ProfileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ProfileError::Io { path: path.into(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| ProfileError::Io {
+            path: path.into(),
+            source,
+        })?;
         Profile::parse(&text, path)
     }
 
     /// Parses profile TOML; `path` is used in error messages only.
     pub fn parse(text: &str, path: &Path) -> Result<Profile, ProfileError> {
-        toml::from_str(text).map_err(|e| ProfileError::Parse { path: path.into(), message: e.to_string() })
+        toml::from_str(text).map_err(|e| ProfileError::Parse {
+            path: path.into(),
+            message: e.to_string(),
+        })
     }
 
     /// The profile used when none is given: every coordinate its own proxy, every body its own
@@ -132,7 +141,12 @@ impl Profile {
             scale_groups: model
                 .bodies
                 .iter()
-                .map(|b| ScaleGroup { name: b.name.clone(), bodies: vec![b.name.clone()], axes: ScaleAxes::Uniform, range: default_scale_range() })
+                .map(|b| ScaleGroup {
+                    name: b.name.clone(),
+                    bodies: vec![b.name.clone()],
+                    axes: ScaleAxes::Uniform,
+                    range: default_scale_range(),
+                })
                 .collect(),
             ..Profile::default()
         }

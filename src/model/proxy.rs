@@ -46,15 +46,26 @@ pub struct Term {
 #[derive(Debug, thiserror::Error)]
 pub enum ProxyError {
     #[error("profile names {what} '{name}', which the model does not have (it has: {valid})")]
-    Unknown { what: &'static str, name: String, valid: String },
+    Unknown {
+        what: &'static str,
+        name: String,
+        valid: String,
+    },
     #[error("coordinate '{0}' is driven twice (by two couplings, or fixed and coupled)")]
     DrivenTwice(String),
     #[error("coupling '{proxy}' lists {coords} coordinates but {coefs} coefficient rows")]
-    CouplingShape { proxy: String, coords: usize, coefs: usize },
+    CouplingShape {
+        proxy: String,
+        coords: usize,
+        coefs: usize,
+    },
     #[error("body '{0}' is in two scale groups")]
     ScaledTwice(String),
     #[error("coupled coordinate '{dependent}' depends on '{independent}', which is not driven by a single identity proxy")]
-    CouplingSource { dependent: String, independent: String },
+    CouplingSource {
+        dependent: String,
+        independent: String,
+    },
 }
 
 /// The map `Φ` from proxies to model state, with its sparsity.
@@ -78,11 +89,13 @@ impl ProxyMap {
         let mut driven = vec![false; model.ny()];
 
         let coord = |name: &str| {
-            model.coordinate_index(name).ok_or_else(|| ProxyError::Unknown {
-                what: "coordinate",
-                name: name.into(),
-                valid: list(model.coordinates.iter().map(|c| c.name.as_str())),
-            })
+            model
+                .coordinate_index(name)
+                .ok_or_else(|| ProxyError::Unknown {
+                    what: "coordinate",
+                    name: name.into(),
+                    valid: list(model.coordinates.iter().map(|c| c.name.as_str())),
+                })
         };
         for (name, value) in &profile.fixed {
             let j = coord(name)?;
@@ -91,15 +104,29 @@ impl ProxyMap {
         }
         for c in &profile.couplings {
             if c.coefficients.len() != c.coordinates.len() {
-                return Err(ProxyError::CouplingShape { proxy: c.proxy.clone(), coords: c.coordinates.len(), coefs: c.coefficients.len() });
+                return Err(ProxyError::CouplingShape {
+                    proxy: c.proxy.clone(),
+                    coords: c.coordinates.len(),
+                    coefs: c.coefficients.len(),
+                });
             }
             let k = proxies.len();
-            let kind = if c.coordinates.iter().filter_map(|n| model.coordinate_index(n)).all(|j| model.coordinates[j].kind == CoordinateKind::Translational) {
+            let kind = if c
+                .coordinates
+                .iter()
+                .filter_map(|n| model.coordinate_index(n))
+                .all(|j| model.coordinates[j].kind == CoordinateKind::Translational)
+            {
                 ProxyKind::Translation
             } else {
                 ProxyKind::Rotation
             };
-            proxies.push(Proxy { name: c.proxy.clone(), kind, range: (c.range[0], c.range[1]), default: 0.0 });
+            proxies.push(Proxy {
+                name: c.proxy.clone(),
+                kind,
+                range: (c.range[0], c.range[1]),
+                default: 0.0,
+            });
             for (name, coefs) in c.coordinates.iter().zip(&c.coefficients) {
                 let j = coord(name)?;
                 if driven[j] {
@@ -107,7 +134,13 @@ impl ProxyMap {
                 }
                 driven[j] = true;
                 offsets[j] = 0.0;
-                terms.push(Term { y_index: j, proxy: k, func: Function::Polynomial { coefficients: coefs.clone() } });
+                terms.push(Term {
+                    y_index: j,
+                    proxy: k,
+                    func: Function::Polynomial {
+                        coefficients: coefs.clone(),
+                    },
+                });
             }
         }
         for c in &model.couplings {
@@ -123,11 +156,24 @@ impl ProxyMap {
                 CoordinateKind::Rotational => ProxyKind::Rotation,
                 CoordinateKind::Translational => ProxyKind::Translation,
             };
-            let range = if c.clamped { c.range } else { (f64::NEG_INFINITY, f64::INFINITY) };
+            let range = if c.clamped {
+                c.range
+            } else {
+                (f64::NEG_INFINITY, f64::INFINITY)
+            };
             identity_of[j] = Some(proxies.len());
             offsets[j] = 0.0;
-            terms.push(Term { y_index: j, proxy: proxies.len(), func: Function::IDENTITY });
-            proxies.push(Proxy { name: c.name.clone(), kind, range, default: c.default });
+            terms.push(Term {
+                y_index: j,
+                proxy: proxies.len(),
+                func: Function::IDENTITY,
+            });
+            proxies.push(Proxy {
+                name: c.name.clone(),
+                kind,
+                range,
+                default: c.default,
+            });
         }
         for c in &model.couplings {
             let k = identity_of[c.independent].ok_or_else(|| ProxyError::CouplingSource {
@@ -135,7 +181,11 @@ impl ProxyMap {
                 independent: model.coordinates[c.independent].name.clone(),
             })?;
             offsets[c.dependent] = 0.0;
-            terms.push(Term { y_index: c.dependent, proxy: k, func: c.func.clone() });
+            terms.push(Term {
+                y_index: c.dependent,
+                proxy: k,
+                func: c.func.clone(),
+            });
         }
         // Scale groups.
         let mut scaled = vec![false; model.nb()];
@@ -163,12 +213,21 @@ impl ProxyMap {
             }
             for (suffix, dims) in axes {
                 let k = proxies.len();
-                proxies.push(Proxy { name: format!("{}{}", g.name, suffix), kind: ProxyKind::Scale, range: (g.range[0], g.range[1]), default: 1.0 });
+                proxies.push(Proxy {
+                    name: format!("{}{}", g.name, suffix),
+                    kind: ProxyKind::Scale,
+                    range: (g.range[0], g.range[1]),
+                    default: 1.0,
+                });
                 for &b in &bodies {
                     for &a in *dims {
                         let j = model.scale_index(b, a);
                         offsets[j] = 0.0;
-                        terms.push(Term { y_index: j, proxy: k, func: Function::IDENTITY });
+                        terms.push(Term {
+                            y_index: j,
+                            proxy: k,
+                            func: Function::IDENTITY,
+                        });
                     }
                 }
             }
@@ -183,7 +242,12 @@ impl ProxyMap {
             }
             *r = start..t;
         }
-        Ok(ProxyMap { proxies, offsets, terms, y_terms })
+        Ok(ProxyMap {
+            proxies,
+            offsets,
+            terms,
+            y_terms,
+        })
     }
 
     /// Number of proxies `np`.

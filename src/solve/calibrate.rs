@@ -34,12 +34,22 @@ pub struct Calibration {
 /// Calibrates the scale proxies on `frames` (observed marker arrays, `3·marker + axis`, NaN gaps).
 /// `frame_template` supplies weights and tracking arrays (its `observed` is ignored). `starts`
 /// gives each frame's initial proxies (see [`track`]); their scale entries are replaced by `p0`'s.
-pub fn calibrate(solver: &mut FrameSolver<'_>, frames: &[&[f64]], frame_template: &FrameProblem<'_>, p0: &[f64], starts: &[Vec<f64>]) -> Calibration {
+pub fn calibrate(
+    solver: &mut FrameSolver<'_>,
+    frames: &[&[f64]],
+    frame_template: &FrameProblem<'_>,
+    p0: &[f64],
+    starts: &[Vec<f64>],
+) -> Calibration {
     let eval = solver.eval;
     let proxy = eval.proxy;
     let np = proxy.np();
-    let scale: Vec<usize> = (0..np).filter(|&k| proxy.proxies[k].kind == ProxyKind::Scale).collect();
-    let pose: Vec<usize> = (0..np).filter(|&k| proxy.proxies[k].kind != ProxyKind::Scale).collect();
+    let scale: Vec<usize> = (0..np)
+        .filter(|&k| proxy.proxies[k].kind == ProxyKind::Scale)
+        .collect();
+    let pose: Vec<usize> = (0..np)
+        .filter(|&k| proxy.proxies[k].kind != ProxyKind::Scale)
+        .collect();
     let (ns, nq) = (scale.len(), pose.len());
     let s = solver.settings.clone();
     let prior = s.calibration_scale_prior;
@@ -47,12 +57,20 @@ pub fn calibrate(solver: &mut FrameSolver<'_>, frames: &[&[f64]], frame_template
     // Per-frame poses at the starting scale.
     let mut poses: Vec<Vec<f64>> = Vec::with_capacity(frames.len());
     for (obs, start) in frames.iter().zip(starts) {
-        let fp = FrameProblem { observed: obs, ..*frame_template };
+        let fp = FrameProblem {
+            observed: obs,
+            ..*frame_template
+        };
         let mut p = start.clone();
         for &k in &scale {
             p[k] = p0[k];
         }
-        let saved = std::mem::replace(&mut solver.free, (0..np).map(|k| proxy.proxies[k].kind != ProxyKind::Scale).collect());
+        let saved = std::mem::replace(
+            &mut solver.free,
+            (0..np)
+                .map(|k| proxy.proxies[k].kind != ProxyKind::Scale)
+                .collect(),
+        );
         solver.solve(&fp, &mut p);
         solver.free = saved;
         poses.push(p);
@@ -66,10 +84,17 @@ pub fn calibrate(solver: &mut FrameSolver<'_>, frames: &[&[f64]], frame_template
             for (i, &k) in scale.iter().enumerate() {
                 p[k] = shared[i];
             }
-            let fp = FrameProblem { observed: obs, ..*frame_template };
+            let fp = FrameProblem {
+                observed: obs,
+                ..*frame_template
+            };
             let (ek, sq, used) = eval.energy(&p, &fp, &mut solver.ws);
             e += ek;
-            rmse += if used > 0 { (sq / used as f64).sqrt() } else { 0.0 };
+            rmse += if used > 0 {
+                (sq / used as f64).sqrt()
+            } else {
+                0.0
+            };
         }
         e += 0.5 * prior * shared.iter().map(|v| (v - 1.0).powi(2)).sum::<f64>();
         (e, rmse / frames.len().max(1) as f64)
@@ -94,7 +119,10 @@ pub fn calibrate(solver: &mut FrameSolver<'_>, frames: &[&[f64]], frame_template
             for (i, &k) in scale.iter().enumerate() {
                 p[k] = shared[i];
             }
-            let fp = FrameProblem { observed: obs, ..*frame_template };
+            let fp = FrameProblem {
+                observed: obs,
+                ..*frame_template
+            };
             eval.linearize(&p, &fp, &mut solver.ws);
             let gn = &solver.ws.gn;
             let mut a = gn.h.select_rows(&pose).select_columns(&pose);
@@ -152,20 +180,40 @@ pub fn calibrate(solver: &mut FrameSolver<'_>, frames: &[&[f64]], frame_template
     for (i, &k) in scale.iter().enumerate() {
         proxies[k] = shared[i];
     }
-    Calibration { proxies, frames: frames.len(), iterations, rmse_m: rmse }
+    Calibration {
+        proxies,
+        frames: frames.len(),
+        iterations,
+        rmse_m: rmse,
+    }
 }
 
 /// Pose-only tracking through `frames` in order at the scale of `p0`, warm-started from frame to
 /// frame (the first frame, and any after a gap, cold-started): returns the proxies at each frame.
 /// This is how calibration frames far apart in a motion get good initial poses.
-pub fn track(solver: &mut FrameSolver<'_>, frames: &[&[f64]], frame_template: &FrameProblem<'_>, p0: &[f64]) -> Vec<Vec<f64>> {
+pub fn track(
+    solver: &mut FrameSolver<'_>,
+    frames: &[&[f64]],
+    frame_template: &FrameProblem<'_>,
+    p0: &[f64],
+) -> Vec<Vec<f64>> {
     let proxy = solver.eval.proxy;
-    let saved = std::mem::replace(&mut solver.free, proxy.proxies.iter().map(|p| p.kind != ProxyKind::Scale).collect());
+    let saved = std::mem::replace(
+        &mut solver.free,
+        proxy
+            .proxies
+            .iter()
+            .map(|p| p.kind != ProxyKind::Scale)
+            .collect(),
+    );
     let mut out = Vec::with_capacity(frames.len());
     let mut p = p0.to_vec();
     let mut warm = false;
     for obs in frames {
-        let fp = FrameProblem { observed: obs, ..*frame_template };
+        let fp = FrameProblem {
+            observed: obs,
+            ..*frame_template
+        };
         if !warm {
             p = p0.to_vec();
             cold_start(solver, &fp, &mut p);

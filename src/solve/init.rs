@@ -90,7 +90,11 @@ pub fn sweep(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mut [f6
         for subtree in [false, true] {
             let mut observed = 0;
             for (m, mk) in model.markers.iter().enumerate() {
-                let counts = if subtree { model.is_ancestor(b, mk.body) } else { mk.body == b };
+                let counts = if subtree {
+                    model.is_ancestor(b, mk.body)
+                } else {
+                    mk.body == b
+                };
                 weights[m] = if counts { frame.marker_weights[m] } else { 0.0 };
                 if weights[m] > 0.0 && !frame.observed[3 * m].is_nan() {
                     observed += 1;
@@ -99,7 +103,10 @@ pub fn sweep(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mut [f6
             if observed < if subtree { 1 } else { 2 } {
                 continue;
             }
-            let local = FrameProblem { marker_weights: &weights, ..*frame };
+            let local = FrameProblem {
+                marker_weights: &weights,
+                ..*frame
+            };
             solver.solve(&local, p);
         }
         solver.settings.min_markers = min_markers;
@@ -113,10 +120,13 @@ pub fn place_root(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mu
     let model = eval.model;
     // Model markers at p, paired with observations.
     eval.energy(p, frame, &mut solver.ws);
-    let roots: Vec<usize> = (0..model.nb()).filter(|&b| model.bodies[b].parent.is_none()).collect();
+    let roots: Vec<usize> = (0..model.nb())
+        .filter(|&b| model.bodies[b].parent.is_none())
+        .collect();
     let observed = |m: usize| {
         let o = &frame.observed[3 * m..3 * m + 3];
-        (frame.marker_weights[m] > 0.0 && o.iter().all(|v| !v.is_nan())).then(|| Vector3::new(o[0], o[1], o[2]))
+        (frame.marker_weights[m] > 0.0 && o.iter().all(|v| !v.is_nan()))
+            .then(|| Vector3::new(o[0], o[1], o[2]))
     };
     let pairs = |root_only: bool| -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
         (0..model.markers.len())
@@ -136,8 +146,16 @@ pub fn place_root(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mu
             [v.x, v.y, v.z]
         })
         .collect();
-    let weights: Vec<f64> = model.markers.iter().map(|mk| if roots.contains(&mk.body) { 1.0 } else { 0.1 }).collect();
-    let target_frame = FrameProblem { observed: &targets, marker_weights: &weights, ..*frame };
+    let weights: Vec<f64> = model
+        .markers
+        .iter()
+        .map(|mk| if roots.contains(&mk.body) { 1.0 } else { 0.1 })
+        .collect();
+    let target_frame = FrameProblem {
+        observed: &targets,
+        marker_weights: &weights,
+        ..*frame
+    };
     let root = root_proxies(solver);
     let saved_free = std::mem::replace(&mut solver.free, vec![false; p.len()]);
     for &k in &root {
@@ -148,7 +166,10 @@ pub fn place_root(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mu
     // The targets are reachable exactly, so a start that fits them is the answer. Headings for
     // the first root rotation proxy: as it is, then spread around the circle, to escape flipped
     // local minima of the Euler decomposition.
-    let first_rot = root.iter().copied().find(|&k| eval.proxy.proxies[k].kind == crate::model::proxy::ProxyKind::Rotation);
+    let first_rot = root
+        .iter()
+        .copied()
+        .find(|&k| eval.proxy.proxies[k].kind == crate::model::proxy::ProxyKind::Rotation);
     let mut best: Option<(f64, Vec<f64>)> = None;
     let starts = if first_rot.is_some() { 9 } else { 1 };
     for i in 0..starts {
@@ -174,7 +195,10 @@ pub fn place_root(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mu
     // Unbounded root angles: the representative in (−π, π].
     for &k in &root {
         let px = &eval.proxy.proxies[k];
-        if px.kind == crate::model::proxy::ProxyKind::Rotation && px.range.0 <= -std::f64::consts::TAU && px.range.1 >= std::f64::consts::TAU {
+        if px.kind == crate::model::proxy::ProxyKind::Rotation
+            && px.range.0 <= -std::f64::consts::TAU
+            && px.range.1 >= std::f64::consts::TAU
+        {
             p[k] = wrap_angle(p[k]);
         }
     }
@@ -183,5 +207,9 @@ pub fn place_root(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mu
 /// The angle equal to `a` modulo 2π in (−π, π].
 pub fn wrap_angle(a: f64) -> f64 {
     let w = (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
-    if w == -std::f64::consts::PI { std::f64::consts::PI } else { w }
+    if w == -std::f64::consts::PI {
+        std::f64::consts::PI
+    } else {
+        w
+    }
 }

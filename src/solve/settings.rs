@@ -39,6 +39,11 @@ pub struct SolverSettings {
     /// (noise alone leaves `E` a fraction ≈ (3M − np)/3M of the residual energy); noise-free data
     /// still converge fully through `residual_tol_m`.
     pub rel_decrease_tol: f64,
+    /// Stop after an accepted, undamped step whose actual decrease matched the predicted one to
+    /// within this fraction of the new `E` (the linearisation is exact to that level, so another
+    /// step gains no more). 0 disables. Default 0.01: measured on 2 mm-noise synthetic trials,
+    /// it halves the iterations (median 2 → 1) with unchanged joint-angle and scale errors.
+    pub model_error_tol: f64,
     /// Stop when the largest step component is below this (proxy units). Default 1e-9.
     pub step_tol: f64,
     /// Step box half-width for rotational proxies (rad). Default 0.5.
@@ -79,6 +84,7 @@ impl Default for SolverSettings {
             max_iterations: 20,
             residual_tol_m: 1e-6,
             rel_decrease_tol: 1e-2,
+            model_error_tol: 0.01,
             step_tol: 1e-9,
             step_rotation_rad: 0.5,
             step_translation_m: 0.25,
@@ -103,6 +109,8 @@ impl Default for SolverSettings {
 impl SolverSettings {
     /// Defaults overridden by a profile's `[solver]` table.
     pub fn from_table(table: &toml::Table) -> Result<SolverSettings, String> {
-        toml::Value::Table(table.clone()).try_into().map_err(|e: toml::de::Error| format!("[solver]: {e}"))
+        toml::Value::Table(table.clone())
+            .try_into()
+            .map_err(|e: toml::de::Error| format!("[solver]: {e}"))
     }
 }

@@ -68,7 +68,11 @@ pub struct FrameSolver<'e> {
 }
 
 impl<'e> FrameSolver<'e> {
-    pub fn new(eval: &'e Evaluator<'e>, settings: SolverSettings, qp: Box<dyn QpSolver>) -> FrameSolver<'e> {
+    pub fn new(
+        eval: &'e Evaluator<'e>,
+        settings: SolverSettings,
+        qp: Box<dyn QpSolver>,
+    ) -> FrameSolver<'e> {
         let np = eval.proxy.np();
         let step_box = eval
             .proxy
@@ -143,12 +147,21 @@ impl<'e> FrameSolver<'e> {
                 let d = lambda * gn.h[(k, k)].max(s.damping_floor);
                 self.damp[k] = d;
                 self.h[(k, k)] += d;
-                let b = if self.free[k] { self.step_box[k] * shrink * self.step_multiplier } else { 0.0 };
+                let b = if self.free[k] {
+                    self.step_box[k] * shrink * self.step_multiplier
+                } else {
+                    0.0
+                };
                 self.lb[k] = (-b).max(self.lo[k] - p[k]);
                 self.ub[k] = b.min(self.hi[k] - p[k]);
             }
             self.dp.fill(0.0);
-            let problem = QpProblem { h: &self.h, g: &gn.g, lb: &self.lb, ub: &self.ub };
+            let problem = QpProblem {
+                h: &self.h,
+                g: &gn.g,
+                lb: &self.lb,
+                ub: &self.ub,
+            };
             if self.qp.solve(&problem, &mut self.dp).is_err() {
                 stats.status = FrameStatus::QpFailed;
                 break;
@@ -156,7 +169,10 @@ impl<'e> FrameSolver<'e> {
             let g_dp = gn.g.dot(&self.dp);
             let hdp = quad_form(&self.h, &self.dp);
             let pred = -g_dp - 0.5 * hdp;
-            let damp_pen: f64 = 0.5 * (0..np).map(|k| self.damp[k] * self.dp[k] * self.dp[k]).sum::<f64>();
+            let damp_pen: f64 = 0.5
+                * (0..np)
+                    .map(|k| self.damp[k] * self.dp[k] * self.dp[k])
+                    .sum::<f64>();
             let step_max = self.dp.amax();
             for k in 0..np {
                 self.trial[k] = p[k] + self.dp[k];
@@ -169,7 +185,11 @@ impl<'e> FrameSolver<'e> {
                 stats.accepted += 1;
                 p.copy_from_slice(&self.trial);
                 stats.energy = e1;
-                stats.rmse_m = if used > 0 { (sq / used as f64).sqrt() } else { f64::NAN };
+                stats.rmse_m = if used > 0 {
+                    (sq / used as f64).sqrt()
+                } else {
+                    f64::NAN
+                };
                 stats.markers_used = used;
                 if rho > 0.75 {
                     lambda = (lambda / 3.0).max(s.damping_min);
@@ -177,7 +197,18 @@ impl<'e> FrameSolver<'e> {
                     lambda = (lambda * 2.0).min(s.damping_max);
                 }
                 let rel = (e0 - e1) / e0.max(f64::MIN_POSITIVE);
-                if stats.rmse_m < s.residual_tol_m || rel < s.rel_decrease_tol || step_max < s.step_tol {
+                // The model's error over the step, |Δf_act − Δf_pred|, estimates what another
+                // iteration could still gain when the step was not cut by the damping or the box.
+                let model_error =
+                    (act + damp_pen - pred - damp_pen).abs() / e1.max(f64::MIN_POSITIVE);
+                let exact_model = s.model_error_tol > 0.0
+                    && model_error < s.model_error_tol
+                    && lambda <= s.damping_init;
+                if stats.rmse_m < s.residual_tol_m
+                    || rel < s.rel_decrease_tol
+                    || step_max < s.step_tol
+                    || exact_model
+                {
                     stats.status = FrameStatus::Converged;
                     break;
                 }
@@ -203,11 +234,16 @@ impl<'e> FrameSolver<'e> {
 /// `xᵀ H x` without allocating.
 fn quad_form(h: &DMatrix<f64>, x: &DVector<f64>) -> f64 {
     let n = x.len();
-    (0..n).map(|c| x[c] * (0..n).map(|r| h[(r, c)] * x[r]).sum::<f64>()).sum()
+    (0..n)
+        .map(|c| x[c] * (0..n).map(|r| h[(r, c)] * x[r]).sum::<f64>())
+        .sum()
 }
 
 impl std::fmt::Debug for FrameSolver<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("FrameSolver").field("qp", &self.qp.name()).field("settings", &self.settings).finish()
+        f.debug_struct("FrameSolver")
+            .field("qp", &self.qp.name())
+            .field("settings", &self.settings)
+            .finish()
     }
 }

@@ -108,7 +108,10 @@ impl BoxQp {
 
     /// Solver with the given settings.
     pub fn with_settings(settings: BoxQpSettings) -> Self {
-        Self { settings, ..Self::default() }
+        Self {
+            settings,
+            ..Self::default()
+        }
     }
 
     /// Solver with workspace preallocated for `n` variables.
@@ -122,7 +125,13 @@ impl BoxQp {
         if self.grad.len() >= n {
             return;
         }
-        for v in [&mut self.grad, &mut self.dir, &mut self.cand, &mut self.step, &mut self.hd] {
+        for v in [
+            &mut self.grad,
+            &mut self.dir,
+            &mut self.cand,
+            &mut self.step,
+            &mut self.hd,
+        ] {
             v.resize(n, 0.0);
         }
         self.inv_diag.resize(n, 0.0);
@@ -191,13 +200,18 @@ impl QpSolver for BoxQp {
         let (h, g) = (problem.h.as_slice(), problem.g.as_slice());
         let (lb, ub) = (problem.lb.as_slice(), problem.ub.as_slice());
         let x = x.as_mut_slice();
-        let (max_iter, min_rel) = (self.settings.max_iterations, self.settings.min_relative_improvement);
+        let (max_iter, min_rel) = (
+            self.settings.max_iterations,
+            self.settings.min_relative_improvement,
+        );
         let g_scale = 1.0 + g.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
         let tol = self.settings.gradient_tolerance;
         let (gtol, stall_tol) = (tol * g_scale, tol.sqrt() * g_scale);
 
         for i in 0..n {
-            x[i] = if x[i].is_finite() { x[i] } else { 0.0 }.max(lb[i]).min(ub[i]);
+            x[i] = if x[i].is_finite() { x[i] } else { 0.0 }
+                .max(lb[i])
+                .min(ub[i]);
         }
         let mut f = self.gradient(h, g, x);
         if !f.is_finite() {
@@ -207,7 +221,10 @@ impl QpSolver for BoxQp {
             }
             f = self.gradient(h, g, x);
             if !f.is_finite() {
-                return Err(QpError::NonFinite { what: "objective", index: 0 });
+                return Err(QpError::NonFinite {
+                    what: "objective",
+                    index: 0,
+                });
             }
         }
 
@@ -232,7 +249,10 @@ impl QpSolver for BoxQp {
             self.newton_direction();
             let slope: f64 = self.free.iter().map(|&i| self.grad[i] * self.dir[i]).sum();
             if slope.is_nan() {
-                return Err(QpError::NonFinite { what: "newton direction", index: 0 });
+                return Err(QpError::NonFinite {
+                    what: "newton direction",
+                    index: 0,
+                });
             }
             if slope >= 0.0 {
                 status = QpStatus::Solved; // gradient at rounding level
@@ -258,7 +278,11 @@ impl QpSolver for BoxQp {
                 break;
             }
         }
-        Ok(QpStats { status, iterations, objective: objective(x, &self.grad[..n], g) })
+        Ok(QpStats {
+            status,
+            iterations,
+            objective: objective(x, &self.grad[..n], g),
+        })
     }
 }
 
@@ -294,7 +318,9 @@ impl BoxQp {
     fn factor_free(&mut self, h: &[f64], n: usize) -> Result<Option<(usize, f64)>, QpError> {
         let scale = self.free.iter().fold(0.0_f64, |m, &i| m.max(h[i * n + i]));
         let shift = self.settings.regularization * if scale > 0.0 { scale } else { 1.0 };
-        let Err((k, value)) = self.factor(h, n, 0.0, shift) else { return Ok(None) };
+        let Err((k, value)) = self.factor(h, n, 0.0, shift) else {
+            return Ok(None);
+        };
         let pivot = self.free[k];
         match self.factor(h, n, shift, 0.5 * shift) {
             Ok(()) => Ok(Some((pivot, value))),
@@ -312,7 +338,11 @@ impl BoxQp {
         self.breaks.clear();
         for &i in &self.free {
             let d = self.dir[i];
-            let tau = if d > 0.0 { (ub[i] - x[i]) / d } else { (lb[i] - x[i]) / d };
+            let tau = if d > 0.0 {
+                (ub[i] - x[i]) / d
+            } else {
+                (lb[i] - x[i]) / d
+            };
             if d != 0.0 && tau < 1.0 {
                 self.breaks.push((tau.max(0.0), i));
             }
@@ -331,7 +361,9 @@ impl BoxQp {
             if fpp > 0.0 && t - fp / fpp <= t_end {
                 return (t - fp / fpp, k == 0);
             }
-            let Some(&(_, b)) = self.breaks.get(k) else { return (1.0, k == 0) };
+            let Some(&(_, b)) = self.breaks.get(k) else {
+                return (1.0, k == 0);
+            };
             // Advance to the breakpoint, then fix variable b there.
             let dt = t_end - t;
             for (ri, hpi) in r.iter_mut().zip(hp.iter()) {
@@ -364,7 +396,11 @@ impl BoxQp {
     ) -> Result<Option<(f64, f64)>, QpError> {
         let n = x.len();
         let st = &self.settings;
-        let beta = if st.line_search_factor > 0.0 && st.line_search_factor < 1.0 { st.line_search_factor } else { 0.5 };
+        let beta = if st.line_search_factor > 0.0 && st.line_search_factor < 1.0 {
+            st.line_search_factor
+        } else {
+            0.5
+        };
         let (armijo, min_step) = (st.armijo, st.min_step);
         let (mut t, mut have_hd) = self.path_minimiser(h, x, lb, ub);
         for _ in 0..MAX_LINE_SEARCH {
@@ -373,7 +409,11 @@ impl BoxQp {
             }
             let mut clipped = false;
             for i in 0..n {
-                let raw = if self.clamped[i] { x[i] } else { x[i] + t * self.dir[i] };
+                let raw = if self.clamped[i] {
+                    x[i]
+                } else {
+                    x[i] + t * self.dir[i]
+                };
                 let c = raw.max(lb[i]).min(ub[i]);
                 clipped |= c != raw;
                 self.cand[i] = c;
@@ -407,7 +447,12 @@ impl BoxQp {
 fn objective(x: &[f64], grad: &[f64], g: &[f64]) -> f64 {
     let finite = grad.iter().all(|v| v.is_finite());
     if finite {
-        0.5 * x.iter().zip(grad).zip(g).map(|((a, b), c)| a * (b + c)).sum::<f64>()
+        0.5 * x
+            .iter()
+            .zip(grad)
+            .zip(g)
+            .map(|((a, b), c)| a * (b + c))
+            .sum::<f64>()
     } else {
         f64::NAN
     }
