@@ -15,15 +15,7 @@ fn kinematics(c: &mut Criterion) {
     let ctx = Context::shipped().expect("shipped model");
     let eval = ctx.evaluator();
     let frames = 1024;
-    let s = synthesize(
-        &ctx.model,
-        &ctx.proxy,
-        &SynthOptions {
-            frames,
-            seed: 5,
-            ..SynthOptions::default()
-        },
-    );
+    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames, seed: 5, ..SynthOptions::default() });
     let ps = &s.truth.proxies;
     let obs = &s.trial.positions;
     let stride = 3 * ctx.model.markers.len();
@@ -32,9 +24,7 @@ fn kinematics(c: &mut Criterion) {
     let mut g = c.benchmark_group("kinematics_one_thread");
     g.throughput(Throughput::Elements(1));
     let y = ctx.proxy.state(&ps[10]);
-    g.bench_function("forward", |b| {
-        b.iter(|| cpu::forward(&ctx.model, black_box(&y), &mut ws.kin))
-    });
+    g.bench_function("forward", |b| b.iter(|| cpu::forward(&ctx.model, black_box(&y), &mut ws.kin)));
     g.bench_function("forward_jacobian", |b| {
         b.iter(|| {
             cpu::forward(&ctx.model, black_box(&y), &mut ws.kin);
@@ -47,9 +37,7 @@ fn kinematics(c: &mut Criterion) {
         tracking_ref: &zeros,
         tracking_weights: &zeros,
     };
-    g.bench_function("linearize_h_g", |b| {
-        b.iter(|| eval.linearize(black_box(&ps[10]), &frame, &mut ws))
-    });
+    g.bench_function("linearize_h_g", |b| b.iter(|| eval.linearize(black_box(&ps[10]), &frame, &mut ws)));
     g.finish();
 
     let mut g = c.benchmark_group("kinematics_batch_rayon");
@@ -60,10 +48,7 @@ fn kinematics(c: &mut Criterion) {
             (0..frames).into_par_iter().for_each_init(
                 || EvalWorkspace::new(&ctx.model, &ctx.proxy),
                 |ws, f| {
-                    let frame = FrameProblem {
-                        observed: &obs[f * stride..(f + 1) * stride],
-                        ..frame
-                    };
+                    let frame = FrameProblem { observed: &obs[f * stride..(f + 1) * stride], ..frame };
                     eval.linearize(&ps[f], &frame, ws);
                     black_box(ws.gn.energy);
                 },

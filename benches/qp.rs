@@ -28,11 +28,7 @@ fn problem(n: usize, seed: u64) -> (DMatrix<f64>, DVector<f64>, DVector<f64>, DV
     let a = DMatrix::from_fn(n, n, |_, _| rng.uniform(-1.0, 1.0));
     let h = a.transpose() * &a / n as f64 + DMatrix::identity(n, n) * 0.05;
     let g = DVector::from_fn(n, |_, _| rng.uniform(-1.0, 1.0));
-    let x_unc = h
-        .clone()
-        .cholesky()
-        .map(|c| c.solve(&(-&g)))
-        .unwrap_or_else(|| DVector::zeros(n));
+    let x_unc = h.clone().cholesky().map(|c| c.solve(&(-&g))).unwrap_or_else(|| DVector::zeros(n));
     let radius = 2.0 * x_unc.amax();
     let mut lb = DVector::from_element(n, -radius);
     let mut ub = DVector::from_element(n, radius);
@@ -49,12 +45,7 @@ fn problem(n: usize, seed: u64) -> (DMatrix<f64>, DVector<f64>, DVector<f64>, DV
 fn bench_qp(c: &mut Criterion) {
     for n in [40, 60] {
         let (h, g, lb, ub) = problem(n, 0xbe7c + n as u64);
-        let p = QpProblem {
-            h: &h,
-            g: &g,
-            lb: &lb,
-            ub: &ub,
-        };
+        let p = QpProblem { h: &h, g: &g, lb: &lb, ub: &ub };
         let mut boxqp = BoxQp::with_capacity(n);
         let mut ipm = ClarabelQp::new(ClarabelQpSettings::default());
 
@@ -71,28 +62,16 @@ fn bench_qp(c: &mut Criterion) {
             (&x - &xc).amax()
         );
         // Warm start as in a trust-region loop: the solution of a slightly different problem.
-        let g_prev = DVector::from_fn(n, |i, _| {
-            g[i] * (1.0 + 0.05 * ((i * 37 % 11) as f64 / 5.0 - 1.0))
-        });
+        let g_prev = DVector::from_fn(n, |i, _| g[i] * (1.0 + 0.05 * ((i * 37 % 11) as f64 / 5.0 - 1.0)));
         let mut previous = DVector::zeros(n);
-        let p_prev = QpProblem {
-            h: &h,
-            g: &g_prev,
-            lb: &lb,
-            ub: &ub,
-        };
+        let p_prev = QpProblem { h: &h, g: &g_prev, lb: &lb, ub: &ub };
         boxqp.solve(&p_prev, &mut previous).expect("boxqp");
         let mut xw = previous.clone();
         let wstats = boxqp.solve(&p, &mut xw).expect("boxqp");
-        eprintln!(
-            "n = {n}: warm start from a perturbed problem: {} iterations",
-            wstats.iterations
-        );
+        eprintln!("n = {n}: warm start from a perturbed problem: {} iterations", wstats.iterations);
 
         let mut group = c.benchmark_group(format!("qp_n{n}"));
-        group
-            .measurement_time(Duration::from_secs(3))
-            .warm_up_time(Duration::from_secs(1));
+        group.measurement_time(Duration::from_secs(3)).warm_up_time(Duration::from_secs(1));
         group.bench_function("boxqp_cold", |b| {
             b.iter(|| {
                 x.fill(0.0);
@@ -105,9 +84,7 @@ fn bench_qp(c: &mut Criterion) {
                 black_box(boxqp.solve(black_box(&p), &mut x).ok());
             })
         });
-        group.bench_function("clarabel_reused", |b| {
-            b.iter(|| black_box(ipm.solve(black_box(&p), &mut xc).ok()))
-        });
+        group.bench_function("clarabel_reused", |b| b.iter(|| black_box(ipm.solve(black_box(&p), &mut xc).ok())));
         group.finish();
     }
 }

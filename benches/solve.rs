@@ -14,15 +14,7 @@ use std::hint::black_box;
 fn solve_sequence(c: &mut Criterion) {
     let ctx = Context::shipped().expect("shipped model");
     let frames = 200;
-    let s = synthesize(
-        &ctx.model,
-        &ctx.proxy,
-        &SynthOptions {
-            frames,
-            seed: 3,
-            ..SynthOptions::default()
-        },
-    );
+    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames, seed: 3, ..SynthOptions::default() });
     let cal = calibrate_subject(&ctx, &[("bench", &s.trial)]).expect("calibration");
     let (map, _, _) = smocap::pipeline::trial::match_markers(&ctx, &s.trial);
     let obs = smocap::pipeline::trial::observations(&s.trial, &map);
@@ -32,11 +24,8 @@ fn solve_sequence(c: &mut Criterion) {
     let y_cal = ctx.proxy.state(&cal.proxies);
     let mut tw = vec![0.0; ny];
     for t in &ctx.proxy.terms {
-        tw[t.y_index] = if ctx.proxy.proxies[t.proxy].kind == ProxyKind::Scale {
-            ctx.settings.scale_tracking_weight
-        } else {
-            0.0
-        };
+        tw[t.y_index] =
+            if ctx.proxy.proxies[t.proxy].kind == ProxyKind::Scale { ctx.settings.scale_tracking_weight } else { 0.0 };
     }
     let mut group = c.benchmark_group("solve_frame");
     group.throughput(Throughput::Elements(frames as u64));
@@ -57,10 +46,7 @@ fn solve_sequence(c: &mut Criterion) {
                 let mut p = p0.clone();
                 let mut its = 0;
                 for f in 0..frames {
-                    let frame = FrameProblem {
-                        observed: &obs[f * stride..(f + 1) * stride],
-                        ..first
-                    };
+                    let frame = FrameProblem { observed: &obs[f * stride..(f + 1) * stride], ..first };
                     its += solver.solve(&frame, &mut p).iterations;
                 }
                 black_box(its)

@@ -84,11 +84,7 @@ struct Wave {
 
 impl Wave {
     fn at(&self, t: f64) -> f64 {
-        let s: f64 = self
-            .parts
-            .iter()
-            .map(|(a, f, ph)| a * (TAU * f * t + ph).sin())
-            .sum();
+        let s: f64 = self.parts.iter().map(|(a, f, ph)| a * (TAU * f * t + ph).sin()).sum();
         self.center + self.amp * s
     }
 }
@@ -108,10 +104,7 @@ pub fn synthesize(model: &Model, proxy: &ProxyMap, opt: &SynthOptions) -> Synthe
         let (lo, hi) = px.range;
         let (center, amp) = match px.kind {
             ProxyKind::Scale => {
-                fixed[k] = Some(
-                    rng.random_range(1.0 - opt.scale_spread..=1.0 + opt.scale_spread)
-                        .clamp(lo, hi),
-                );
+                fixed[k] = Some(rng.random_range(1.0 - opt.scale_spread..=1.0 + opt.scale_spread).clamp(lo, hi));
                 (0.0, 0.0)
             }
             _ if lo.is_finite() && hi.is_finite() => {
@@ -125,9 +118,10 @@ pub fn synthesize(model: &Model, proxy: &ProxyMap, opt: &SynthOptions) -> Synthe
         waves.push(Wave { center, amp, parts });
     }
     // Walk forward along x when the model has a root translation named like one.
-    let walk = proxy.proxies.iter().position(|p| {
-        p.kind == ProxyKind::Translation && (p.name.ends_with("_tx") || p.name.ends_with("tx"))
-    });
+    let walk = proxy
+        .proxies
+        .iter()
+        .position(|p| p.kind == ProxyKind::Translation && (p.name.ends_with("_tx") || p.name.ends_with("tx")));
 
     let nm = model.markers.len();
     let normal = Normal::new(0.0, 1.0).expect("unit normal");
@@ -138,9 +132,8 @@ pub fn synthesize(model: &Model, proxy: &ProxyMap, opt: &SynthOptions) -> Synthe
             v.map(|c| c / n * opt.misplace_m)
         })
         .collect();
-    let drift: Vec<[(f64, f64); 3]> = (0..nm)
-        .map(|_| [0; 3].map(|_| (rng.random_range(0.1..0.5), rng.random_range(0.0..TAU))))
-        .collect();
+    let drift: Vec<[(f64, f64); 3]> =
+        (0..nm).map(|_| [0; 3].map(|_| (rng.random_range(0.1..0.5), rng.random_range(0.0..TAU)))).collect();
 
     let mut moved = model.clone();
     for (m, mk) in moved.markers.iter_mut().enumerate() {
@@ -158,9 +151,7 @@ pub fn synthesize(model: &Model, proxy: &ProxyMap, opt: &SynthOptions) -> Synthe
     let mean_gap = 8.0;
     for f in 0..opt.frames {
         let t = f as f64 / opt.rate_hz;
-        let p: Vec<f64> = (0..np)
-            .map(|k| fixed[k].unwrap_or_else(|| waves[k].at(t)))
-            .collect();
+        let p: Vec<f64> = (0..np).map(|k| fixed[k].unwrap_or_else(|| waves[k].at(t))).collect();
         let mut p = p;
         if let Some(k) = walk {
             p[k] = default[k] + opt.speed_m_s * t + 0.02 * waves[k].at(t);
@@ -192,22 +183,12 @@ pub fn synthesize(model: &Model, proxy: &ProxyMap, opt: &SynthOptions) -> Synthe
     let truth = Truth {
         model: model.name.clone(),
         options: opt.clone(),
-        scales: proxy
-            .proxies
-            .iter()
-            .zip(&fixed)
-            .filter_map(|(px, v)| v.map(|v| (px.name.clone(), v)))
-            .collect(),
+        scales: proxy.proxies.iter().zip(&fixed).filter_map(|(px, v)| v.map(|v| (px.name.clone(), v))).collect(),
         body_scales: model
             .bodies
             .iter()
             .enumerate()
-            .map(|(b, body)| {
-                (
-                    body.name.clone(),
-                    [0, 1, 2].map(|a| y0[model.scale_index(b, a)]),
-                )
-            })
+            .map(|(b, body)| (body.name.clone(), [0, 1, 2].map(|a| y0[model.scale_index(b, a)])))
             .collect(),
         coordinate_names: model.coordinates.iter().map(|c| c.name.clone()).collect(),
         coordinates: truth_q,

@@ -5,10 +5,7 @@ use std::path::PathBuf;
 use std::process::{Command, Output};
 
 fn smocap(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_smocap"))
-        .args(args)
-        .output()
-        .expect("run smocap")
+    Command::new(env!("CARGO_BIN_EXE_smocap")).args(args).output().expect("run smocap")
 }
 
 fn tmp(name: &str) -> PathBuf {
@@ -23,15 +20,9 @@ fn stderr(o: &Output) -> String {
 
 fn assert_clean_failure(o: &Output, needle: &str) {
     let err = stderr(o);
-    assert!(
-        !o.status.success(),
-        "expected failure, got success; stderr: {err}"
-    );
+    assert!(!o.status.success(), "expected failure, got success; stderr: {err}");
     assert!(!err.contains("panicked"), "panic: {err}");
-    assert!(
-        err.contains(needle),
-        "stderr should mention {needle:?}: {err}"
-    );
+    assert!(err.contains(needle), "stderr should mention {needle:?}: {err}");
 }
 
 #[test]
@@ -60,23 +51,16 @@ fn synth_then_solve_writes_a_report_with_truth_errors() {
         report.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     for key in ["smocap_version", "backend", "threads", "trials", "totals"] {
         assert!(v.get(key).is_some(), "report lacks {key}");
     }
     let t = &v["trials"][0];
     assert_eq!(t["status"], "ok");
     assert_eq!(t["frames"], 80);
-    for key in [
-        "marker_rmse_mm",
-        "ms_per_frame",
-        "iterations",
-        "solve_wall_s",
-        "scale",
-        "pose_error_deg",
-        "scale_error_pct",
-    ] {
+    for key in
+        ["marker_rmse_mm", "ms_per_frame", "iterations", "solve_wall_s", "scale", "pose_error_deg", "scale_error_pct"]
+    {
         assert!(t.get(key).is_some(), "trial lacks {key}");
     }
     assert!(t["pose_error_deg"]["rmse"].as_f64().unwrap() < 1.0);
@@ -104,12 +88,7 @@ fn a_model_with_an_unknown_joint_type_is_an_error() {
     std::fs::write(&p, "<mujoco model=\"m\">\n<worldbody>\n<body name=\"a\">\n<joint name=\"j\" type=\"screw\"/>\n</body>\n</worldbody>\n</mujoco>\n").unwrap();
     let trc = tmp("any.trc");
     std::fs::write(&trc, "PathFileType\t4\t(X/Y/Z)\tany.trc\nDataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\n100\t100\t1\t1\tmm\nFrame#\tTime\tA\t\t\n\t\tX1\tY1\tZ1\n1\t0.0\t1.0\t2.0\t3.0\n").unwrap();
-    let o = smocap(&[
-        "solve",
-        "--model",
-        p.to_str().unwrap(),
-        trc.to_str().unwrap(),
-    ]);
+    let o = smocap(&["solve", "--model", p.to_str().unwrap(), trc.to_str().unwrap()]);
     assert_clean_failure(&o, "screw");
 }
 
@@ -127,8 +106,5 @@ fn demo_runs_on_the_embedded_default() {
     let o = smocap(&["demo", "--frames", "60", "--threads", "1"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        out.contains("RMSE") && out.contains("joint angle RMSE"),
-        "{out}"
-    );
+    assert!(out.contains("RMSE") && out.contains("joint angle RMSE"), "{out}");
 }

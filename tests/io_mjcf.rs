@@ -31,11 +31,9 @@ fn body_pose(m: &Model, q: &[f64], b: usize) -> Isometry3<f64> {
             let amount = mo.func.eval(mo.coordinate.map_or(0.0, |c| q[c])).0;
             t *= match mo.kind {
                 MotionKind::Rotation => Isometry3::rotation(mo.axis * amount),
-                MotionKind::Translation => Isometry3::translation(
-                    mo.axis.x * amount,
-                    mo.axis.y * amount,
-                    mo.axis.z * amount,
-                ),
+                MotionKind::Translation => {
+                    Isometry3::translation(mo.axis.x * amount, mo.axis.y * amount, mo.axis.z * amount)
+                }
             };
         }
         x = x * t * j.child_offset.inverse();
@@ -44,15 +42,8 @@ fn body_pose(m: &Model, q: &[f64], b: usize) -> Isometry3<f64> {
 }
 
 fn body_rotation(xml_body_attrs: &str, compiler: &str) -> Matrix3<f64> {
-    let xml = format!(
-        "<mujoco>{compiler}<worldbody><body name='b' {xml_body_attrs}/></worldbody></mujoco>"
-    );
-    parse(&xml).bodies[0]
-        .joint
-        .parent_offset
-        .rotation
-        .to_rotation_matrix()
-        .into_inner()
+    let xml = format!("<mujoco>{compiler}<worldbody><body name='b' {xml_body_attrs}/></worldbody></mujoco>");
+    parse(&xml).bodies[0].joint.parent_offset.rotation.to_rotation_matrix().into_inner()
 }
 
 fn assert_mat(a: Matrix3<f64>, b: Matrix3<f64>) {
@@ -90,17 +81,14 @@ fn body_pos_places_children_in_parent_frame() {
 
 #[test]
 fn hinge_range_and_ref_use_compiler_angle_unit() {
-    let body =
-        "<worldbody><body name='b'><joint name='h' range='-90 45' ref='30'/></body></worldbody>";
+    let body = "<worldbody><body name='b'><joint name='h' range='-90 45' ref='30'/></body></worldbody>";
     let deg = parse(&format!("<mujoco>{body}</mujoco>"));
     let c = &deg.coordinates[0];
     assert_eq!(c.kind, CoordinateKind::Rotational);
     assert!((c.range.0 + FRAC_PI_2).abs() < EPS && (c.range.1 - PI / 4.0).abs() < EPS);
     assert!((c.default - FRAC_PI_6).abs() < EPS);
     assert!(c.clamped && !c.locked);
-    let rad = parse(&format!(
-        "<mujoco><compiler angle='radian'/>{body}</mujoco>"
-    ));
+    let rad = parse(&format!("<mujoco><compiler angle='radian'/>{body}</mujoco>"));
     assert_eq!(rad.coordinates[0].range, (-90.0, 45.0));
     assert_eq!(rad.coordinates[0].default, 30.0);
 }
@@ -126,9 +114,7 @@ fn hinge_motion_is_q_minus_ref_about_axis() {
 #[test]
 fn limited_flags_and_autolimits() {
     let j = "<joint name='a' range='0 1'/><joint name='b' range='0 1' limited='false'/><joint name='c' range='0 1' limited='true'/>";
-    let on = parse(&format!(
-        "<mujoco><worldbody><body name='b'>{j}</body></worldbody></mujoco>"
-    ));
+    let on = parse(&format!("<mujoco><worldbody><body name='b'>{j}</body></worldbody></mujoco>"));
     let clamped: Vec<_> = on.coordinates.iter().map(|c| c.clamped).collect();
     assert_eq!(clamped, [true, false, true]);
     // Without autolimits a range needs an explicit `limited`, as in MuJoCo.
@@ -141,10 +127,7 @@ fn limited_flags_and_autolimits() {
         )
     };
     let e = off(j).expect_err("range without limited");
-    assert!(
-        e.to_string().contains("not 'limited'") && e.line() == Some(2),
-        "{e}"
-    );
+    assert!(e.to_string().contains("not 'limited'") && e.line() == Some(2), "{e}");
     let m = off(&j.replace("<joint name='a' range='0 1'/>", "<joint name='a'/>")).expect("parses");
     let clamped: Vec<_> = m.coordinates.iter().map(|c| c.clamped).collect();
     assert_eq!(clamped, [false, false, true]);
@@ -154,10 +137,7 @@ fn limited_flags_and_autolimits() {
 fn slide_joint_translates_in_metres() {
     let m = parse("<mujoco><worldbody><body name='b' pos='0 0 1'><joint name='s' type='slide' axis='1 0 0' range='-0.5 0.5' ref='0.1'/></body></worldbody></mujoco>");
     let c = &m.coordinates[0];
-    assert_eq!(
-        (c.kind, c.range, c.default),
-        (CoordinateKind::Translational, (-0.5, 0.5), 0.1)
-    );
+    assert_eq!((c.kind, c.range, c.default), (CoordinateKind::Translational, (-0.5, 0.5), 0.1));
     assert_eq!(m.motions[0].kind, MotionKind::Translation);
     let p = body_pose(&m, &[0.4], 0).translation.vector;
     assert_vec(p, Vector3::new(0.3, 0.0, 1.0));
@@ -166,10 +146,7 @@ fn slide_joint_translates_in_metres() {
 #[test]
 fn quat_is_normalised_w_first() {
     let r = body_rotation("quat='2 2 0 0'", "");
-    assert_mat(
-        r,
-        Matrix3::new(1.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 1.0, 0.0),
-    ); // 90° about x
+    assert_mat(r, Matrix3::new(1.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 1.0, 0.0)); // 90° about x
 }
 
 #[test]
@@ -177,20 +154,11 @@ fn euler_lowercase_is_intrinsic_uppercase_extrinsic() {
     let rx = Matrix3::new(1.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 1.0, 0.0);
     let ry = Matrix3::new(0.0, 0.0, 1.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0);
     // Rotating axes: R = Rx · Ry; fixed axes: R = Ry · Rx.
-    assert_mat(
-        body_rotation("euler='90 90 0'", ""),
-        Matrix3::new(0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0),
-    );
+    assert_mat(body_rotation("euler='90 90 0'", ""), Matrix3::new(0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0));
     assert_mat(body_rotation("euler='90 90 0'", ""), rx * ry);
+    assert_mat(body_rotation("euler='90 90 0'", "<compiler eulerseq='XYZ'/>"), ry * rx);
     assert_mat(
-        body_rotation("euler='90 90 0'", "<compiler eulerseq='XYZ'/>"),
-        ry * rx,
-    );
-    assert_mat(
-        body_rotation(
-            "euler='1.5707963267948966 0 0'",
-            "<compiler angle='radian' eulerseq='zyx'/>",
-        ),
+        body_rotation("euler='1.5707963267948966 0 0'", "<compiler angle='radian' eulerseq='zyx'/>"),
         Matrix3::new(0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0),
     );
 }
@@ -199,25 +167,13 @@ fn euler_lowercase_is_intrinsic_uppercase_extrinsic() {
 fn axisangle_xyaxes_and_zaxis() {
     let rz90 = Matrix3::new(0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
     assert_mat(body_rotation("axisangle='0 0 3 90'", ""), rz90);
-    assert_mat(
-        body_rotation(
-            "axisangle='0 0 1 1.5707963267948966'",
-            "<compiler angle='radian'/>",
-        ),
-        rz90,
-    );
+    assert_mat(body_rotation("axisangle='0 0 1 1.5707963267948966'", "<compiler angle='radian'/>"), rz90);
     // x axis → (0 1 0), y axis (made orthogonal to x) → (−1 0 0).
     assert_mat(body_rotation("xyaxes='0 1 0 -1 1 0'", ""), rz90);
     // +z onto +x: 90° about y.
-    assert_mat(
-        body_rotation("zaxis='2 0 0'", ""),
-        Matrix3::new(0.0, 0.0, 1.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0),
-    );
+    assert_mat(body_rotation("zaxis='2 0 0'", ""), Matrix3::new(0.0, 0.0, 1.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0));
     // +z onto −z: 180° about x.
-    assert_mat(
-        body_rotation("zaxis='0 0 -1'", ""),
-        Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0),
-    );
+    assert_mat(body_rotation("zaxis='0 0 -1'", ""), Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0));
 }
 
 #[test]
@@ -236,10 +192,7 @@ fn ball_expands_to_three_rotations() {
             (MotionKind::Rotation, Vector3::z())
         ]
     );
-    assert!(m
-        .coordinates
-        .iter()
-        .all(|c| c.clamped && (c.range.1 - PI / 3.0).abs() < EPS && c.range.0 == -c.range.1));
+    assert!(m.coordinates.iter().all(|c| c.clamped && (c.range.1 - PI / 3.0).abs() < EPS && c.range.0 == -c.range.1));
     assert_eq!(m.bodies[0].joint.name, "sh");
 }
 
@@ -247,10 +200,7 @@ fn ball_expands_to_three_rotations() {
 fn free_joint_coordinates_are_the_body_pose() {
     let m = parse("<mujoco><worldbody><body name='pelvis' pos='1 2 3' euler='10 20 30'><joint name='root' type='free'/></body></worldbody></mujoco>");
     let names: Vec<_> = m.coordinates.iter().map(|c| c.name.as_str()).collect();
-    assert_eq!(
-        names,
-        ["root_tx", "root_ty", "root_tz", "root_rz", "root_ry", "root_rx"]
-    );
+    assert_eq!(names, ["root_tx", "root_ty", "root_tz", "root_rz", "root_ry", "root_rx"]);
     let kinds: Vec<_> = m.motions.iter().map(|mo| (mo.kind, mo.axis)).collect();
     use MotionKind::*;
     assert_eq!(
@@ -286,14 +236,8 @@ fn joint_pos_turns_the_body_about_the_anchor() {
     let m = parse(xml);
     let j = &m.bodies[1].joint;
     // Anchor in parent frame: (1,0,0) + Rz(90)·(0.5,0,0) = (1, 0.5, 0).
-    assert_vec(
-        j.parent_offset.translation.vector,
-        Vector3::new(1.0, 0.5, 0.0),
-    );
-    assert_vec(
-        j.child_offset.translation.vector,
-        Vector3::new(0.5, 0.0, 0.0),
-    );
+    assert_vec(j.parent_offset.translation.vector, Vector3::new(1.0, 0.5, 0.0));
+    assert_vec(j.child_offset.translation.vector, Vector3::new(0.5, 0.0, 0.0));
     let tip = m.markers[0].offset;
     let world = |q: f64| body_pose(&m, &[q], 1) * Point3::from(tip);
     // Rest: body b origin at (1,0,1), its x axis along world y: tip at (1,1,1).
@@ -330,20 +274,12 @@ fn default_classes_with_childclass_and_class_override() {
           </worldbody></mujoco>",
     );
     let axes: Vec<_> = m.motions.iter().map(|mo| mo.axis).collect();
-    assert_eq!(
-        axes,
-        [Vector3::x(), Vector3::y(), Vector3::y(), Vector3::z()]
-    );
+    assert_eq!(axes, [Vector3::x(), Vector3::y(), Vector3::y(), Vector3::z()]);
     let ranges: Vec<_> = m.coordinates.iter().map(|c| c.range).collect();
     assert_eq!(ranges, [(-1.0, 1.0), (-1.0, 1.0), (0.0, 2.0), (-1.0, 1.0)]);
     assert_eq!(m.markers[0].offset, Vector3::new(0.0, 0.0, -1.0));
-    let e = parse_err(
-        "<mujoco><worldbody><body name='b'><joint class='nope'/></body></worldbody></mujoco>",
-    );
-    assert!(
-        e.to_string().contains("unknown default class 'nope'"),
-        "{e}"
-    );
+    let e = parse_err("<mujoco><worldbody><body name='b'><joint class='nope'/></body></worldbody></mujoco>");
+    assert!(e.to_string().contains("unknown default class 'nope'"), "{e}");
 }
 
 #[test]
@@ -359,24 +295,13 @@ fn equality_polycoef_folds_in_joint_refs() {
     let coef = [0.1, 2.0, -1.0, 0.5, 0.25];
     for b in [-1.0, 0.0, 0.4, 2.0] {
         let d: f64 = b - (-0.2);
-        let expected = 0.3
-            + coef
-                .iter()
-                .enumerate()
-                .map(|(k, ck)| ck * d.powi(k as i32))
-                .sum::<f64>();
+        let expected = 0.3 + coef.iter().enumerate().map(|(k, ck)| ck * d.powi(k as i32)).sum::<f64>();
         assert!((c.func.eval(b).0 - expected).abs() < 1e-12);
     }
-    assert!(
-        (m.coordinates[0].default - (0.3 + 0.1)).abs() < EPS,
-        "dependent default follows the coupling"
-    );
+    assert!((m.coordinates[0].default - (0.3 + 0.1)).abs() < EPS, "dependent default follows the coupling");
     let j3 = &m.coordinates[2];
     assert!(j3.locked && (j3.default - 0.75).abs() < EPS);
-    assert!(
-        warnings.iter().any(|w| w.contains("<weld>")),
-        "{warnings:?}"
-    );
+    assert!(warnings.iter().any(|w| w.contains("<weld>")), "{warnings:?}");
 }
 
 #[test]
@@ -392,29 +317,14 @@ fn sites_become_markers_on_their_body() {
     let xml = "<mujoco><worldbody><site name='w'/><body name='a'><geom size='1'/><site name='m1' pos='0.1 0.2 0.3'/><site pos='1 1 1'/>
         <body name='b'><site name='m2' fromto='0 0 0 0 0 2'/><camera/><light/><inertial mass='1' pos='0 0 0'/></body></body></worldbody></mujoco>";
     let (m, warnings) = parse_mjcf_with_warnings(xml, "t.xml").expect("parses");
-    let markers: Vec<_> = m
-        .markers
-        .iter()
-        .map(|k| (k.name.as_str(), k.body, k.offset, k.weight))
-        .collect();
-    assert_eq!(
-        markers,
-        [
-            ("m1", 0, Vector3::new(0.1, 0.2, 0.3), 1.0),
-            ("m2", 1, Vector3::new(0.0, 0.0, 1.0), 1.0)
-        ]
-    );
+    let markers: Vec<_> = m.markers.iter().map(|k| (k.name.as_str(), k.body, k.offset, k.weight)).collect();
+    assert_eq!(markers, [("m1", 0, Vector3::new(0.1, 0.2, 0.3), 1.0), ("m2", 1, Vector3::new(0.0, 0.0, 1.0), 1.0)]);
     assert_eq!(warnings.len(), 1, "only the worldbody site: {warnings:?}");
 }
 
 fn err_line_col(e: &MjcfError) -> (u32, u32, &str) {
     match e {
-        MjcfError::Element {
-            line,
-            column,
-            element,
-            ..
-        } => (*line, *column, element.as_str()),
+        MjcfError::Element { line, column, element, .. } => (*line, *column, element.as_str()),
         other => panic!("unexpected {other}"),
     }
 }
@@ -426,11 +336,7 @@ fn unknown_joint_type_error_names_line_and_alternatives() {
     );
     assert_eq!(err_line_col(&e), (4, 19, "joint"));
     let msg = e.to_string();
-    assert!(
-        msg.starts_with("test.xml:4:19:")
-            && msg.contains("expected one of hinge, slide, ball, free"),
-        "{msg}"
-    );
+    assert!(msg.starts_with("test.xml:4:19:") && msg.contains("expected one of hinge, slide, ball, free"), "{msg}");
 }
 
 #[test]
@@ -438,30 +344,22 @@ fn malformed_numbers_are_reported_with_line() {
     let e = parse_err("<mujoco><worldbody>\n<body name='b' pos='1 2'/></worldbody></mujoco>");
     assert_eq!(err_line_col(&e).0, 2);
     assert!(e.to_string().contains("expected 3 finite numbers"), "{e}");
-    let e = parse_err(
-        "<mujoco><worldbody><body name='b'>\n\n<joint range='0 x'/></body></worldbody></mujoco>",
-    );
+    let e = parse_err("<mujoco><worldbody><body name='b'>\n\n<joint range='0 x'/></body></worldbody></mujoco>");
     assert_eq!(err_line_col(&e), (3, 8, "joint"));
 }
 
 #[test]
 fn two_orientation_attributes_are_rejected() {
-    let e = parse_err(
-        "<mujoco><worldbody>\n\n<body name='b' quat='1 0 0 0' euler='0 0 0'/></worldbody></mujoco>",
-    );
+    let e = parse_err("<mujoco><worldbody>\n\n<body name='b' quat='1 0 0 0' euler='0 0 0'/></worldbody></mujoco>");
     assert_eq!(err_line_col(&e).0, 3);
     assert!(e.to_string().contains("'quat' and 'euler'"), "{e}");
 }
 
 #[test]
 fn unsupported_elements_are_rejected_by_name() {
-    for (tag, line) in [
-        ("include file='x.xml'", 2),
-        ("frame", 3),
-        ("replicate count='2'", 3),
-        ("composite", 3),
-        ("attach", 3),
-    ] {
+    for (tag, line) in
+        [("include file='x.xml'", 2), ("frame", 3), ("replicate count='2'", 3), ("composite", 3), ("attach", 3)]
+    {
         let inner = format!("<{tag}/>");
         let xml = if line == 2 {
             format!("<mujoco>\n{inner}<worldbody/></mujoco>")
@@ -470,11 +368,7 @@ fn unsupported_elements_are_rejected_by_name() {
         };
         let e = parse_err(&xml);
         let name = tag.split(' ').next().unwrap_or(tag);
-        assert_eq!(
-            err_line_col(&e),
-            (line, if line == 2 { 1 } else { 16 }, name),
-            "{e}"
-        );
+        assert_eq!(err_line_col(&e), (line, if line == 2 { 1 } else { 16 }, name), "{e}");
     }
 }
 
@@ -506,19 +400,13 @@ fn read_mjcf_reads_files_and_reports_missing_ones() {
     let dir = std::env::temp_dir().join(format!("smocap_mjcf_{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let path = dir.join("arm.xml");
-    std::fs::write(
-        &path,
-        "<mujoco><worldbody><body name='b'><joint name='h'/></body></worldbody></mujoco>",
-    )
-    .expect("write");
+    std::fs::write(&path, "<mujoco><worldbody><body name='b'><joint name='h'/></body></worldbody></mujoco>")
+        .expect("write");
     let (m, warnings) = read_mjcf(&path).expect("reads");
     assert_eq!((m.name.as_str(), m.nq(), warnings.len()), ("arm", 1, 0));
     let missing = dir.join("missing.xml");
     let e = read_mjcf(&missing).expect_err("missing file fails");
-    assert!(
-        matches!(e, MjcfError::Io { .. }) && e.to_string().contains("missing.xml"),
-        "{e}"
-    );
+    assert!(matches!(e, MjcfError::Io { .. }) && e.to_string().contains("missing.xml"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -558,26 +446,15 @@ fn byte_mutations_never_panic() {
         let text = String::from_utf8_lossy(&bytes);
         ok += usize::from(parse_mjcf_with_warnings(&text, "fuzz.xml").is_ok());
     }
-    assert!(
-        ok > 0 && ok < 1000,
-        "mutations reach both outcomes: {ok} parsed"
-    );
+    assert!(ok > 0 && ok < 1000, "mutations reach both outcomes: {ok} parsed");
 }
 
 #[test]
 fn shipped_fullbody_model_imports_with_documented_counts() {
     let xml = include_str!("../models/fullbody.xml");
-    let (m, warnings) =
-        parse_mjcf_with_warnings(xml, "models/fullbody.xml").expect("shipped model parses");
-    assert_eq!(
-        (m.name.as_str(), m.nb(), m.nq(), m.markers.len()),
-        ("fullbody", 26, 55, 53)
-    );
+    let (m, warnings) = parse_mjcf_with_warnings(xml, "models/fullbody.xml").expect("shipped model parses");
+    assert_eq!((m.name.as_str(), m.nb(), m.nq(), m.markers.len()), ("fullbody", 26, 55, 53));
     assert!(warnings.is_empty(), "{warnings:?}");
-    let pelvis = m
-        .coordinates
-        .iter()
-        .find(|c| c.name == "pelvis_tz")
-        .expect("pelvis_tz");
+    let pelvis = m.coordinates.iter().find(|c| c.name == "pelvis_tz").expect("pelvis_tz");
     assert!(!pelvis.clamped && pelvis.kind == CoordinateKind::Translational);
 }

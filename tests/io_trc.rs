@@ -21,18 +21,7 @@ fn close(a: [f64; 3], b: [f64; 3]) -> bool {
 
 /// (file, frames, rate, markers, first label, last label, row 1 of first marker in mm,
 /// row 1 of last marker in mm, last frame number, last time)
-type Expect = (
-    &'static str,
-    usize,
-    f64,
-    usize,
-    &'static str,
-    &'static str,
-    [f64; 3],
-    [f64; 3],
-    i64,
-    f64,
-);
+type Expect = (&'static str, usize, f64, usize, &'static str, &'static str, [f64; 3], [f64; 3], i64, f64);
 
 const SHARED_FILES: [Expect; 4] = [
     (
@@ -114,10 +103,7 @@ fn double_tabs_and_leading_spaces_in_header_are_read_by_name() {
         return;
     };
     let text = std::fs::read_to_string(path).unwrap();
-    assert!(
-        text.lines().nth(2).unwrap().contains("\t\t"),
-        "fixture lost its double tabs"
-    );
+    assert!(text.lines().nth(2).unwrap().contains("\t\t"), "fixture lost its double tabs");
     let t = parse_trc(&text, "motion_capture_walk.trc").unwrap();
     assert_eq!((t.rate_hz, t.n_frames(), t.n_markers()), (100.0, 238, 41));
 }
@@ -138,11 +124,7 @@ fn gaps_from_empty_nan_and_missing_trailing_cells_read_as_none() {
     assert_eq!((t.n_frames(), t.n_markers()), (3, 2));
     assert!(close(t.position(0, 1).unwrap(), [0.004, 0.005, 0.006]));
     assert_eq!(t.position(1, 0), None, "empty cells");
-    assert_eq!(
-        t.position(2, 0),
-        None,
-        "NaN on one axis makes the marker a gap"
-    );
+    assert_eq!(t.position(2, 0), None, "NaN on one axis makes the marker a gap");
     assert_eq!(t.position(2, 1), None, "missing trailing cells");
     assert_eq!(t.gap_counts(), vec![2, 1]);
     assert!(t.warnings.is_empty(), "{:?}", t.warnings);
@@ -150,13 +132,7 @@ fn gaps_from_empty_nan_and_missing_trailing_cells_read_as_none() {
 
 #[test]
 fn units_are_converted_to_metres() {
-    for (u, s) in [
-        ("mm", 1e-3),
-        ("cm", 1e-2),
-        ("m", 1.0),
-        ("M", 1.0),
-        ("in", 0.0254),
-    ] {
+    for (u, s) in [("mm", 1e-3), ("cm", 1e-2), ("m", 1.0), ("M", 1.0), ("in", 0.0254)] {
         let text = SMALL.replace("\tmm\t", &format!("\t{u}\t"));
         let t = parse_trc(&text, "units").unwrap();
         assert_eq!(t.source_units, u);
@@ -167,24 +143,13 @@ fn units_are_converted_to_metres() {
 
 #[test]
 fn crlf_trailing_whitespace_blank_lines_and_count_mismatches_are_tolerated() {
-    let text = SMALL
-        .replace("\t3\t2\tmm", "\t5\t7\tmm")
-        .replace('\n', " \r\n")
-        + "\r\n\r\n  \r\n";
+    let text = SMALL.replace("\t3\t2\tmm", "\t5\t7\tmm").replace('\n', " \r\n") + "\r\n\r\n  \r\n";
     let t = parse_trc(&text, "crlf").unwrap();
     assert_eq!((t.n_frames(), t.n_markers()), (3, 2));
     assert_eq!(t.labels, ["A", "B"]);
     assert!(close(t.position(0, 1).unwrap(), [0.004, 0.005, 0.006]));
-    assert!(
-        t.warnings.iter().any(|w| w.contains("NumMarkers")),
-        "{:?}",
-        t.warnings
-    );
-    assert!(
-        t.warnings.iter().any(|w| w.contains("NumFrames")),
-        "{:?}",
-        t.warnings
-    );
+    assert!(t.warnings.iter().any(|w| w.contains("NumMarkers")), "{:?}", t.warnings);
+    assert!(t.warnings.iter().any(|w| w.contains("NumFrames")), "{:?}", t.warnings);
 }
 
 #[test]
@@ -202,19 +167,12 @@ fn write_then_read_round_trips_to_printed_precision() {
             assert!((back.times[f] - t.times[f]).abs() < 1e-6);
             for m in 0..t.n_markers() {
                 match (t.position(f, m), back.position(f, m)) {
-                    (Some(a), Some(b)) => assert!(
-                        a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9),
-                        "{units}"
-                    ),
+                    (Some(a), Some(b)) => assert!(a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9), "{units}"),
                     (a, b) => assert_eq!(a, b),
                 }
             }
         }
-        assert_eq!(
-            to_trc_string(&back, units, "rt.trc").unwrap(),
-            text,
-            "second write is identical"
-        );
+        assert_eq!(to_trc_string(&back, units, "rt.trc").unwrap(), text, "second write is identical");
     }
 }
 
@@ -228,36 +186,20 @@ fn write_trc_to_disk_round_trips_a_shared_file() {
     write_trc(&out, &t, "mm").unwrap();
     let back = read_trc(&out).unwrap();
     let _ = std::fs::remove_file(&out);
-    assert_eq!(
-        (back.n_frames(), back.n_markers(), back.labels.clone()),
-        (151, 41, t.labels.clone())
-    );
-    assert!(t
-        .positions
-        .iter()
-        .zip(&back.positions)
-        .all(|(a, b)| (a - b).abs() < 1e-9));
+    assert_eq!((back.n_frames(), back.n_markers(), back.labels.clone()), (151, 41, t.labels.clone()));
+    assert!(t.positions.iter().zip(&back.positions).all(|(a, b)| (a - b).abs() < 1e-9));
 }
 
 #[test]
 fn writer_rejects_unknown_units_and_inconsistent_trials() {
     let t = parse_trc(SMALL, "small").unwrap();
-    assert!(matches!(
-        to_trc_string(&t, "furlong", "x"),
-        Err(TrcError::Unwritable { .. })
-    ));
+    assert!(matches!(to_trc_string(&t, "furlong", "x"), Err(TrcError::Unwritable { .. })));
     let mut bad = t.clone();
     bad.positions.pop();
-    assert!(matches!(
-        to_trc_string(&bad, "mm", "x"),
-        Err(TrcError::Unwritable { .. })
-    ));
+    assert!(matches!(to_trc_string(&bad, "mm", "x"), Err(TrcError::Unwritable { .. })));
     let mut bad = t;
     bad.labels[0] = "A\tB".into();
-    assert!(matches!(
-        to_trc_string(&bad, "mm", "x"),
-        Err(TrcError::Unwritable { .. })
-    ));
+    assert!(matches!(to_trc_string(&bad, "mm", "x"), Err(TrcError::Unwritable { .. })));
 }
 
 fn err(text: &str) -> TrcError {
@@ -278,91 +220,26 @@ fn header_lines(n: usize) -> String {
 #[test]
 fn malformed_inputs_give_the_right_error_and_line() {
     assert!(matches!(err(""), TrcError::MissingHeader { line: 1, .. }));
-    assert!(matches!(
-        err("hello\nworld\n"),
-        TrcError::MissingHeader { line: 1, .. }
-    ));
-    assert!(matches!(
-        err(&header_lines(1)),
-        TrcError::MissingHeader { line: 2, .. }
-    ));
-    assert!(matches!(
-        err(&header_lines(2)),
-        TrcError::MissingHeader { line: 3, .. }
-    ));
-    assert!(matches!(
-        err(&header_lines(3)),
-        TrcError::MissingHeader { line: 4, .. }
-    ));
-    assert!(matches!(
-        err(&header_lines(4)),
-        TrcError::NoData { line: 5, .. }
-    ));
-    assert!(matches!(
-        err(&header_lines(6)),
-        TrcError::NoData { line: 7, .. }
-    ));
+    assert!(matches!(err("hello\nworld\n"), TrcError::MissingHeader { line: 1, .. }));
+    assert!(matches!(err(&header_lines(1)), TrcError::MissingHeader { line: 2, .. }));
+    assert!(matches!(err(&header_lines(2)), TrcError::MissingHeader { line: 3, .. }));
+    assert!(matches!(err(&header_lines(3)), TrcError::MissingHeader { line: 4, .. }));
+    assert!(matches!(err(&header_lines(4)), TrcError::NoData { line: 5, .. }));
+    assert!(matches!(err(&header_lines(6)), TrcError::NoData { line: 7, .. }));
     let e = err(&SMALL.replace("\tmm\t", "\tfurlongs\t"));
-    assert!(
-        matches!(&e, TrcError::UnknownUnits { line: 3, units, .. } if units == "furlongs"),
-        "{e}"
-    );
+    assert!(matches!(&e, TrcError::UnknownUnits { line: 3, units, .. } if units == "furlongs"), "{e}");
     let e = err(&SMALL.replace("50.00\t50.00", "fast\t50.00"));
-    assert!(
-        matches!(&e, TrcError::BadHeaderValue { line: 3, field, .. } if field == "DataRate"),
-        "{e}"
-    );
+    assert!(matches!(&e, TrcError::BadHeaderValue { line: 3, field, .. } if field == "DataRate"), "{e}");
     let e = err(&SMALL.replace("\tUnits\t", "\tWhatever\t"));
     assert!(matches!(e, TrcError::MissingHeader { line: 2, .. }), "{e}");
     let e = err(&SMALL.replace("8.0", "8.0x"));
-    assert!(
-        matches!(
-            e,
-            TrcError::NonNumeric {
-                line: 8,
-                column: 7,
-                ..
-            }
-        ),
-        "{e}"
-    );
+    assert!(matches!(e, TrcError::NonNumeric { line: 8, column: 7, .. }), "{e}");
     let e = err(&SMALL.replace("3\t0.040", "three\t0.040"));
-    assert!(
-        matches!(
-            e,
-            TrcError::NonNumeric {
-                line: 9,
-                column: 1,
-                ..
-            }
-        ),
-        "{e}"
-    );
+    assert!(matches!(e, TrcError::NonNumeric { line: 9, column: 1, .. }), "{e}");
     let e = err(&SMALL.replace("2\t0.020", "2\tt"));
-    assert!(
-        matches!(
-            e,
-            TrcError::NonNumeric {
-                line: 8,
-                column: 2,
-                ..
-            }
-        ),
-        "{e}"
-    );
+    assert!(matches!(e, TrcError::NonNumeric { line: 8, column: 2, .. }), "{e}");
     let e = err(&SMALL.replace("6.0\n", "6.0\t99.0\n"));
-    assert!(
-        matches!(
-            e,
-            TrcError::RaggedRow {
-                line: 7,
-                found: 7,
-                n_markers: 2,
-                ..
-            }
-        ),
-        "{e}"
-    );
+    assert!(matches!(e, TrcError::RaggedRow { line: 7, found: 7, n_markers: 2, .. }), "{e}");
     assert_eq!(e.line(), Some(7));
 }
 

@@ -55,10 +55,7 @@ fn every_function_kind_has_a_consistent_derivative() {
             let h = 1e-6;
             let fd = (f.eval(x + h).0 - f.eval(x - h).0) / (2.0 * h);
             let d = f.eval(x).1;
-            assert!(
-                (fd - d).abs() <= 1e-6 * d.abs().max(1.0),
-                "kind {kind} at {x}: {d} vs {fd}"
-            );
+            assert!((fd - d).abs() <= 1e-6 * d.abs().max(1.0), "kind {kind} at {x}: {d} vs {fd}");
         }
     }
 }
@@ -108,15 +105,9 @@ fn gradient_is_the_derivative_of_the_energy_and_hessian_is_gauss_newton() {
         let mut weights: Vec<f64> = model.markers.iter().map(|m| m.weight).collect();
         weights[2] = 0.0;
         let tref: Vec<f64> = (0..model.ny()).map(|_| r.random_range(-0.5..1.0)).collect();
-        let tw: Vec<f64> = (0..model.ny())
-            .map(|j| if j % 3 == 0 { 0.3 } else { 0.0 })
-            .collect();
-        let frame = FrameProblem {
-            observed: &obs,
-            marker_weights: &weights,
-            tracking_ref: &tref,
-            tracking_weights: &tw,
-        };
+        let tw: Vec<f64> = (0..model.ny()).map(|j| if j % 3 == 0 { 0.3 } else { 0.0 }).collect();
+        let frame =
+            FrameProblem { observed: &obs, marker_weights: &weights, tracking_ref: &tref, tracking_weights: &tw };
         eval.linearize(&p, &frame, &mut ws);
         let g = ws.gn.g.clone();
         let hm = ws.gn.h.clone();
@@ -126,13 +117,8 @@ fn gradient_is_the_derivative_of_the_energy_and_hessian_is_gauss_newton() {
             let mut pm = p.clone();
             pp[k] += h;
             pm[k] -= h;
-            let fd = (eval.energy(&pp, &frame, &mut ws).0 - eval.energy(&pm, &frame, &mut ws).0)
-                / (2.0 * h);
-            assert!(
-                (fd - g[k]).abs() <= 1e-6 * g[k].abs().max(1.0),
-                "seed {seed}: g[{k}] {} vs fd {fd}",
-                g[k]
-            );
+            let fd = (eval.energy(&pp, &frame, &mut ws).0 - eval.energy(&pm, &frame, &mut ws).0) / (2.0 * h);
+            assert!((fd - g[k]).abs() <= 1e-6 * g[k].abs().max(1.0), "seed {seed}: g[{k}] {} vs fd {fd}", g[k]);
         }
         // H = J_mᵀ W J_m + J_Φᵀ W_t J_Φ from finite-difference residual Jacobians.
         let np = p.len();
@@ -180,11 +166,7 @@ fn gradient_is_the_derivative_of_the_energy_and_hessian_is_gauss_newton() {
 fn proxy_map_jacobian_matches_finite_differences_for_polynomial_couplings() {
     let model = random_model(3, 7);
     let nq = model.nq();
-    let names: Vec<String> = model.coordinates[6..nq - 2]
-        .iter()
-        .take(3)
-        .map(|c| c.name.clone())
-        .collect();
+    let names: Vec<String> = model.coordinates[6..nq - 2].iter().take(3).map(|c| c.name.clone()).collect();
     assert_eq!(names.len(), 3);
     let text = format!(
         "[[coupling]]\nproxy = \"spine\"\nrange = [-1.0, 1.0]\ncoordinates = [{}]\ncoefficients = [[0.0, 0.3, 0.05], [0.1, 0.5], [0.0, 0.2, -0.1, 0.02]]\n",
@@ -220,32 +202,13 @@ fn batched_evaluation_equals_frame_by_frame_evaluation() {
     let eval = Evaluator::new(&model, &proxy);
     let weights: Vec<f64> = model.markers.iter().map(|m| m.weight).collect();
     let zeros = vec![0.0; model.ny()];
-    let ps: Vec<Vec<f64>> = (0..40)
-        .map(|f| {
-            proxy
-                .default_proxies()
-                .iter()
-                .map(|v| v + 0.01 * f as f64)
-                .collect()
-        })
-        .collect();
-    let obs: Vec<Vec<f64>> = ps
-        .iter()
-        .map(|p| {
-            markers_at(&model, &proxy.state(p))
-                .iter()
-                .map(|v| v + 0.003)
-                .collect()
-        })
-        .collect();
+    let ps: Vec<Vec<f64>> =
+        (0..40).map(|f| proxy.default_proxies().iter().map(|v| v + 0.01 * f as f64).collect()).collect();
+    let obs: Vec<Vec<f64>> =
+        ps.iter().map(|p| markers_at(&model, &proxy.state(p)).iter().map(|v| v + 0.003).collect()).collect();
     let frames: Vec<FrameProblem> = obs
         .iter()
-        .map(|o| FrameProblem {
-            observed: o,
-            marker_weights: &weights,
-            tracking_ref: &zeros,
-            tracking_weights: &zeros,
-        })
+        .map(|o| FrameProblem { observed: o, marker_weights: &weights, tracking_ref: &zeros, tracking_weights: &zeros })
         .collect();
     let batch = linearize_batch(&eval, &frames, &ps);
     let energies = energy_batch(&eval, &frames, &ps);
@@ -269,12 +232,8 @@ fn dense_marker_jacobian_is_jy_times_jphi() {
     let obs = markers_at(&model, &proxy.state(&p));
     let weights: Vec<f64> = vec![1.0; model.markers.len()];
     let zeros = vec![0.0; model.ny()];
-    let frame = FrameProblem {
-        observed: &obs,
-        marker_weights: &weights,
-        tracking_ref: &zeros,
-        tracking_weights: &zeros,
-    };
+    let frame =
+        FrameProblem { observed: &obs, marker_weights: &weights, tracking_ref: &zeros, tracking_weights: &zeros };
     eval.linearize(&p, &frame, &mut ws);
     cpu::jacobian(&model, &eval.layout, &mut ws.kin);
     let jm = eval.marker_jacobian(&ws);

@@ -4,8 +4,7 @@
 
 use nalgebra::{DMatrix, DVector};
 use smocap::solve::qp::{
-    BoxQp, BoxQpSettings, ClarabelQp, ClarabelQpSettings, LinearConstraints, QpError, QpProblem,
-    QpSolver, QpStatus,
+    BoxQp, BoxQpSettings, ClarabelQp, ClarabelQpSettings, LinearConstraints, QpError, QpProblem, QpSolver, QpStatus,
 };
 
 /// SplitMix64: tiny seeded generator so the tests need no RNG API.
@@ -34,12 +33,7 @@ struct Owned {
 
 impl Owned {
     fn problem(&self) -> QpProblem<'_> {
-        QpProblem {
-            h: &self.h,
-            g: &self.g,
-            lb: &self.lb,
-            ub: &self.ub,
-        }
+        QpProblem { h: &self.h, g: &self.g, lb: &self.lb, ub: &self.ub }
     }
 }
 
@@ -76,13 +70,7 @@ fn kkt_violation_tol(p: &Owned, x: &DVector<f64>, at_bound: f64) -> f64 {
     let grad = &p.h * x + &p.g;
     let mut worst = 0.0_f64;
     for i in 0..x.len() {
-        assert!(
-            x[i] >= p.lb[i] && x[i] <= p.ub[i],
-            "x[{i}] = {} outside [{}, {}]",
-            x[i],
-            p.lb[i],
-            p.ub[i]
-        );
+        assert!(x[i] >= p.lb[i] && x[i] <= p.ub[i], "x[{i}] = {} outside [{}, {}]", x[i], p.lb[i], p.ub[i]);
         let gi = grad[i];
         let v = if p.lb[i] == p.ub[i] {
             0.0
@@ -105,9 +93,7 @@ fn kkt_violation(p: &Owned, x: &DVector<f64>) -> f64 {
 
 fn boxqp_solve(p: &Owned) -> (DVector<f64>, f64, QpStatus) {
     let mut x = DVector::zeros(p.g.len());
-    let stats = BoxQp::new()
-        .solve(&p.problem(), &mut x)
-        .expect("boxqp solve");
+    let stats = BoxQp::new().solve(&p.problem(), &mut x).expect("boxqp solve");
     (x, stats.objective, stats.status)
 }
 
@@ -125,9 +111,7 @@ fn oracle_settings() -> ClarabelQpSettings {
 
 fn clarabel_solve(p: &Owned) -> (DVector<f64>, f64) {
     let mut x = DVector::zeros(p.g.len());
-    let stats = ClarabelQp::new(oracle_settings())
-        .solve(&p.problem(), &mut x)
-        .expect("clarabel solve");
+    let stats = ClarabelQp::new(oracle_settings()).solve(&p.problem(), &mut x).expect("clarabel solve");
     assert_eq!(stats.status, QpStatus::Solved);
     (x, stats.objective)
 }
@@ -135,12 +119,7 @@ fn clarabel_solve(p: &Owned) -> (DVector<f64>, f64) {
 fn assert_close(a: &DVector<f64>, b: &DVector<f64>, tol: f64, what: &str) {
     for i in 0..a.len() {
         let err = (a[i] - b[i]).abs() / b[i].abs().max(1.0);
-        assert!(
-            err <= tol,
-            "{what}: component {i}: {} vs {} (err {err:e})",
-            a[i],
-            b[i]
-        );
+        assert!(err <= tol, "{what}: component {i}: {} vs {} (err {err:e})", a[i], b[i]);
     }
 }
 
@@ -158,18 +137,10 @@ fn boxqp_matches_clarabel_on_random_problems() {
             let sc = ipm.solve(&p.problem(), &mut xc).expect("clarabel");
             assert_eq!(sb.status, QpStatus::Solved, "n = {n}");
             assert_eq!(sc.status, QpStatus::Solved, "n = {n}");
-            assert!(
-                kkt_violation(&p, &xb) <= 1e-9,
-                "n = {n}: boxqp KKT {:e}",
-                kkt_violation(&p, &xb)
-            );
+            assert!(kkt_violation(&p, &xb) <= 1e-9, "n = {n}: boxqp KKT {:e}", kkt_violation(&p, &xb));
             assert_close(&xb, &xc, 1e-6, &format!("n = {n}"));
             let fc = p.problem().objective(&xc);
-            assert!(
-                (sb.objective - fc).abs() <= 1e-9 * fc.abs().max(1.0),
-                "n = {n}: {} vs {fc}",
-                sb.objective
-            );
+            assert!((sb.objective - fc).abs() <= 1e-9 * fc.abs().max(1.0), "n = {n}: {} vs {fc}", sb.objective);
             // Interior-point iterates stop short of weakly active bounds: count them as active.
             let kc = kkt_violation_tol(&p, &xc, 1e-6);
             assert!(kc <= 1e-6, "n = {n}: clarabel KKT {kc:e}");
@@ -184,17 +155,8 @@ fn boxqp_interior_optimum_equals_newton_solution() {
         let h = random_spd(&mut rng, n);
         let g = DVector::from_fn(n, |_, _| rng.uniform(-1.0, 1.0));
         let expected = h.clone().cholesky().expect("spd").solve(&(-&g));
-        let wide = if inf {
-            f64::INFINITY
-        } else {
-            10.0 * expected.amax() + 1.0
-        };
-        let p = Owned {
-            h,
-            g,
-            lb: DVector::from_element(n, -wide),
-            ub: DVector::from_element(n, wide),
-        };
+        let wide = if inf { f64::INFINITY } else { 10.0 * expected.amax() + 1.0 };
+        let p = Owned { h, g, lb: DVector::from_element(n, -wide), ub: DVector::from_element(n, wide) };
         let (x, f, status) = boxqp_solve(&p);
         assert_eq!(status, QpStatus::Solved);
         assert_close(&x, &expected, 1e-10, "interior optimum");
@@ -213,12 +175,7 @@ fn boxqp_all_active_optimum_is_a_corner() {
     // Gradient dominates every row of H over the box, so the minimiser is the corner -sign(g).
     let push = 10.0 * h.abs().row_sum().max();
     let g = DVector::from_fn(n, |i, _| if i % 3 == 0 { push } else { -push });
-    let p = Owned {
-        h,
-        g,
-        lb: DVector::from_element(n, -1.0),
-        ub: DVector::from_element(n, 1.0),
-    };
+    let p = Owned { h, g, lb: DVector::from_element(n, -1.0), ub: DVector::from_element(n, 1.0) };
     let (x, _, status) = boxqp_solve(&p);
     assert_eq!(status, QpStatus::Solved);
     for i in 0..n {
@@ -277,16 +234,9 @@ fn boxqp_solves_singular_hessian_made_well_posed_by_bounds() {
         let (x, f, status) = boxqp_solve(&p);
         assert_eq!(status, QpStatus::Solved, "n = {n}");
         // The minimiser need not be unique: compare optimal values and check KKT.
-        assert!(
-            kkt_violation(&p, &x) <= 1e-8,
-            "n = {n}: KKT {:e}",
-            kkt_violation(&p, &x)
-        );
+        assert!(kkt_violation(&p, &x) <= 1e-8, "n = {n}: KKT {:e}", kkt_violation(&p, &x));
         let (_, fc) = clarabel_solve(&p);
-        assert!(
-            (f - fc).abs() <= 1e-8 * fc.abs().max(1.0),
-            "n = {n}: {f} vs {fc}"
-        );
+        assert!((f - fc).abs() <= 1e-8 * fc.abs().max(1.0), "n = {n}: {f} vs {fc}");
     }
 }
 
@@ -299,16 +249,8 @@ fn boxqp_handles_ill_conditioned_and_rank_deficient_hessians() {
         let n = 2 + trial % 40;
         let rank = if trial % 2 == 0 { n } else { n / 2 };
         let decades = rng.uniform(0.0, 12.0);
-        let q = DMatrix::from_fn(n, n, |_, _| rng.uniform(-1.0, 1.0))
-            .qr()
-            .q();
-        let eig = DVector::from_fn(n, |i, _| {
-            if i < rank {
-                10f64.powf(-decades * i as f64 / n as f64)
-            } else {
-                0.0
-            }
-        });
+        let q = DMatrix::from_fn(n, n, |_, _| rng.uniform(-1.0, 1.0)).qr().q();
+        let eig = DVector::from_fn(n, |i, _| if i < rank { 10f64.powf(-decades * i as f64 / n as f64) } else { 0.0 });
         let h = &q * DMatrix::from_diagonal(&eig) * q.transpose();
         let g = DVector::from_fn(n, |_, _| rng.uniform(-1.0, 1.0));
         let open = |rng: &mut Rng, v: f64| {
@@ -326,10 +268,7 @@ fn boxqp_handles_ill_conditioned_and_rank_deficient_hessians() {
         let kkt = kkt_violation(&p, &x);
         assert!(kkt <= 1e-8, "trial {trial}: KKT {kkt:e}");
         let (_, fc) = clarabel_solve(&p);
-        assert!(
-            f <= fc + 1e-9 * fc.abs().max(1.0),
-            "trial {trial}: {f} vs clarabel {fc}"
-        );
+        assert!(f <= fc + 1e-9 * fc.abs().max(1.0), "trial {trial}: {f} vs clarabel {fc}");
     }
 }
 
@@ -338,26 +277,12 @@ fn boxqp_zero_gradient_at_a_bound_is_optimal() {
     // x1 sits on its lower bound with zero gradient there (degenerate complementarity).
     let h = DMatrix::from_row_slice(3, 3, &[2.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]);
     let g = DVector::from_vec(vec![-1.0, 0.0, 1.0]);
-    let p = Owned {
-        h,
-        g,
-        lb: DVector::from_vec(vec![-1.0, 0.0, -1.0]),
-        ub: DVector::from_element(3, 1.0),
-    };
-    for warm in [
-        vec![0.0, 0.0, 0.0],
-        vec![0.9, 0.7, 0.9],
-        vec![-5.0, -5.0, 5.0],
-    ] {
+    let p = Owned { h, g, lb: DVector::from_vec(vec![-1.0, 0.0, -1.0]), ub: DVector::from_element(3, 1.0) };
+    for warm in [vec![0.0, 0.0, 0.0], vec![0.9, 0.7, 0.9], vec![-5.0, -5.0, 5.0]] {
         let mut x = DVector::from_vec(warm);
         let stats = BoxQp::new().solve(&p.problem(), &mut x).expect("solve");
         assert_eq!(stats.status, QpStatus::Solved);
-        assert_close(
-            &x,
-            &DVector::from_vec(vec![0.5, 0.0, -1.0]),
-            1e-12,
-            "degenerate",
-        );
+        assert_close(&x, &DVector::from_vec(vec![0.5, 0.0, -1.0]), 1e-12, "degenerate");
     }
 }
 
@@ -394,39 +319,22 @@ fn boxqp_reports_indefinite_or_unbounded_problems() {
     let inf = DVector::from_element(2, f64::INFINITY);
     let cases = [
         // Indefinite.
-        (
-            DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, -1.0]),
-            DVector::from_vec(vec![0.0, 1.0]),
-        ),
+        (DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, -1.0]), DVector::from_vec(vec![0.0, 1.0])),
         // PSD, singular, objective linear and decreasing along the unbounded x1 axis.
-        (
-            DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, 0.0]),
-            DVector::from_vec(vec![1.0, 1.0]),
-        ),
+        (DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, 0.0]), DVector::from_vec(vec![1.0, 1.0])),
     ];
     for (h, g) in cases {
-        let p = Owned {
-            h,
-            g,
-            lb: -&inf,
-            ub: inf.clone(),
-        };
+        let p = Owned { h, g, lb: -&inf, ub: inf.clone() };
         let mut x = DVector::zeros(2);
         let r = BoxQp::new().solve(&p.problem(), &mut x);
-        assert!(
-            matches!(r, Err(QpError::NotPositiveDefinite { pivot: 1, .. })),
-            "{r:?}"
-        );
+        assert!(matches!(r, Err(QpError::NotPositiveDefinite { pivot: 1, .. })), "{r:?}");
         let r = ClarabelQp::new(ClarabelQpSettings::default()).solve(&p.problem(), &mut x);
         assert!(r.is_err(), "clarabel: {r:?}");
     }
 }
 
 fn solvers() -> Vec<Box<dyn QpSolver>> {
-    vec![
-        Box::new(BoxQp::new()),
-        Box::new(ClarabelQp::new(ClarabelQpSettings::default())),
-    ]
+    vec![Box::new(BoxQp::new()), Box::new(ClarabelQp::new(ClarabelQpSettings::default()))]
 }
 
 #[test]
@@ -435,55 +343,22 @@ fn solvers_reject_dimension_mismatch() {
     let (g3, g2) = (DVector::zeros(3), DVector::zeros(2));
     let (b3, b2) = (DVector::from_element(3, 1.0), DVector::from_element(2, 1.0));
     let bad = [
-        QpProblem {
-            h: &h,
-            g: &g2,
-            lb: &(-&b3),
-            ub: &b3,
-        },
-        QpProblem {
-            h: &h,
-            g: &g3,
-            lb: &(-&b2),
-            ub: &b3,
-        },
-        QpProblem {
-            h: &h,
-            g: &g3,
-            lb: &(-&b3),
-            ub: &b2,
-        },
+        QpProblem { h: &h, g: &g2, lb: &(-&b3), ub: &b3 },
+        QpProblem { h: &h, g: &g3, lb: &(-&b2), ub: &b3 },
+        QpProblem { h: &h, g: &g3, lb: &(-&b3), ub: &b2 },
     ];
     let h_rect = DMatrix::zeros(3, 2);
-    let rect = QpProblem {
-        h: &h_rect,
-        g: &g3,
-        lb: &(-&b3),
-        ub: &b3,
-    };
+    let rect = QpProblem { h: &h_rect, g: &g3, lb: &(-&b3), ub: &b3 };
     for mut s in solvers() {
         for p in bad.iter().chain([&rect]) {
             let mut x = DVector::zeros(3);
-            assert!(
-                matches!(s.solve(p, &mut x), Err(QpError::Dimensions { .. })),
-                "{}",
-                s.name()
-            );
+            assert!(matches!(s.solve(p, &mut x), Err(QpError::Dimensions { .. })), "{}", s.name());
         }
     }
     // Constraint matrix with the wrong number of columns.
-    let cons = LinearConstraints {
-        a: DMatrix::zeros(1, 2),
-        lo: DVector::zeros(1),
-        hi: DVector::zeros(1),
-    };
+    let cons = LinearConstraints { a: DMatrix::zeros(1, 2), lo: DVector::zeros(1), hi: DVector::zeros(1) };
     let mut s = ClarabelQp::with_constraints(cons, ClarabelQpSettings::default());
-    let p = QpProblem {
-        h: &h,
-        g: &g3,
-        lb: &(-&b3),
-        ub: &b3,
-    };
+    let p = QpProblem { h: &h, g: &g3, lb: &(-&b3), ub: &b3 };
     assert!(s.solve(&p, &mut DVector::zeros(3)).is_err());
 }
 
@@ -500,58 +375,14 @@ fn solvers_reject_inconsistent_or_non_finite_data() {
     let g_inf = DVector::from_vec(vec![f64::INFINITY, 0.0]);
     for mut s in solvers() {
         let mut x = DVector::zeros(2);
-        let r = s.solve(
-            &QpProblem {
-                h: &h,
-                g: &g,
-                lb: &lb,
-                ub: &ub,
-            },
-            &mut x,
-        );
-        assert!(
-            matches!(r, Err(QpError::InconsistentBounds { index: 1, .. })),
-            "{r:?}"
-        );
-        let r = s.solve(
-            &QpProblem {
-                h: &h,
-                g: &g,
-                lb: &nan_b,
-                ub: &one,
-            },
-            &mut x,
-        );
-        assert!(
-            matches!(r, Err(QpError::InconsistentBounds { index: 1, .. })),
-            "{r:?}"
-        );
-        let r = s.solve(
-            &QpProblem {
-                h: &h_nan,
-                g: &g,
-                lb: &(-&one),
-                ub: &one,
-            },
-            &mut x,
-        );
-        assert!(
-            matches!(r, Err(QpError::NonFinite { what: "h", .. })),
-            "{r:?}"
-        );
-        let r = s.solve(
-            &QpProblem {
-                h: &h,
-                g: &g_inf,
-                lb: &(-&one),
-                ub: &one,
-            },
-            &mut x,
-        );
-        assert!(
-            matches!(r, Err(QpError::NonFinite { what: "g", .. })),
-            "{r:?}"
-        );
+        let r = s.solve(&QpProblem { h: &h, g: &g, lb: &lb, ub: &ub }, &mut x);
+        assert!(matches!(r, Err(QpError::InconsistentBounds { index: 1, .. })), "{r:?}");
+        let r = s.solve(&QpProblem { h: &h, g: &g, lb: &nan_b, ub: &one }, &mut x);
+        assert!(matches!(r, Err(QpError::InconsistentBounds { index: 1, .. })), "{r:?}");
+        let r = s.solve(&QpProblem { h: &h_nan, g: &g, lb: &(-&one), ub: &one }, &mut x);
+        assert!(matches!(r, Err(QpError::NonFinite { what: "h", .. })), "{r:?}");
+        let r = s.solve(&QpProblem { h: &h, g: &g_inf, lb: &(-&one), ub: &one }, &mut x);
+        assert!(matches!(r, Err(QpError::NonFinite { what: "g", .. })), "{r:?}");
     }
 }
 
@@ -561,12 +392,7 @@ fn clarabel_honours_general_linear_constraints() {
     let h = DMatrix::identity(2, 2);
     let g = DVector::from_vec(vec![-1.0, 1.0]);
     let wide = DVector::from_element(2, 10.0);
-    let p = QpProblem {
-        h: &h,
-        g: &g,
-        lb: &(-&wide),
-        ub: &wide,
-    };
+    let p = QpProblem { h: &h, g: &g, lb: &(-&wide), ub: &wide };
     let band = LinearConstraints {
         a: DMatrix::from_row_slice(1, 2, &[1.0, -1.0]),
         lo: DVector::from_element(1, -0.5),
@@ -587,16 +413,7 @@ fn clarabel_honours_general_linear_constraints() {
     };
     s.set_constraints(Some(cons));
     let g0 = DVector::zeros(2);
-    s.solve(
-        &QpProblem {
-            h: &h,
-            g: &g0,
-            lb: &(-&wide),
-            ub: &wide,
-        },
-        &mut x,
-    )
-    .expect("solve");
+    s.solve(&QpProblem { h: &h, g: &g0, lb: &(-&wide), ub: &wide }, &mut x).expect("solve");
     assert_close(&x, &DVector::from_vec(vec![0.2, 0.8]), 1e-7, "equality");
 }
 
@@ -612,11 +429,7 @@ fn clarabel_reused_across_updates_matches_fresh_solver() {
         for i in 0..n {
             let (l, u) = (base.lb[i], base.ub[i]);
             let shift = rng.uniform(-0.2, 0.2);
-            (p.lb[i], p.ub[i]) = if k == 3 {
-                (f64::NEG_INFINITY, u + shift.abs())
-            } else {
-                (l + shift, u + shift)
-            };
+            (p.lb[i], p.ub[i]) = if k == 3 { (f64::NEG_INFINITY, u + shift.abs()) } else { (l + shift, u + shift) };
         }
         let mut x = DVector::zeros(n);
         reused.solve(&p.problem(), &mut x).expect("reused");
@@ -631,21 +444,13 @@ fn clarabel_reused_across_updates_matches_fresh_solver() {
 fn boxqp_reports_iteration_cap_with_a_feasible_point() {
     let mut rng = Rng(9);
     let p = random_problem(&mut rng, 30);
-    let settings = BoxQpSettings {
-        max_iterations: 1,
-        ..Default::default()
-    };
+    let settings = BoxQpSettings { max_iterations: 1, ..Default::default() };
     let mut x = DVector::zeros(30);
-    let stats = BoxQp::with_settings(settings)
-        .solve(&p.problem(), &mut x)
-        .expect("solve");
+    let stats = BoxQp::with_settings(settings).solve(&p.problem(), &mut x).expect("solve");
     assert_eq!(stats.status, QpStatus::MaxIterations);
     assert_eq!(stats.iterations, 1);
     assert!((0..30).all(|i| x[i] >= p.lb[i] && x[i] <= p.ub[i]));
-    assert!(
-        (stats.objective - p.problem().objective(&x)).abs()
-            <= 1e-9 * stats.objective.abs().max(1.0)
-    );
+    assert!((stats.objective - p.problem().objective(&x)).abs() <= 1e-9 * stats.objective.abs().max(1.0));
 }
 
 #[test]
@@ -657,9 +462,6 @@ fn settings_round_trip_through_serde_with_documented_defaults() {
     assert_eq!(back.armijo, 0.2);
     let c: ClarabelQpSettings = serde_json::from_str(r#"{"tol_feas": 1e-9}"#).expect("partial");
     assert_eq!(c.tol_feas, 1e-9);
-    assert_eq!(
-        c.max_iterations,
-        ClarabelQpSettings::default().max_iterations
-    );
+    assert_eq!(c.max_iterations, ClarabelQpSettings::default().max_iterations);
     assert!(!c.verbose);
 }

@@ -16,12 +16,7 @@ fn run(opt: SynthOptions) -> smocap::pipeline::report::TrialReport {
 
 #[test]
 fn noise_free_trial_recovers_joint_angles_and_scales_exactly() {
-    let rep = run(SynthOptions {
-        frames: 120,
-        seed: 11,
-        noise_m: 0.0,
-        ..SynthOptions::default()
-    });
+    let rep = run(SynthOptions { frames: 120, seed: 11, noise_m: 0.0, ..SynthOptions::default() });
     let (pe, se) = (rep.pose_error_deg.unwrap(), rep.scale_error_pct.unwrap());
     eprintln!(
         "noise-free: pose rmse {:.4}° p90 {:.4}°, scale mean {:.4} % max {:.4} %, it p50 {:?}",
@@ -34,12 +29,7 @@ fn noise_free_trial_recovers_joint_angles_and_scales_exactly() {
 #[test]
 fn two_millimetre_noise_keeps_joint_angles_within_a_degree_and_scales_within_a_percent() {
     for seed in [12, 13, 14, 15] {
-        let rep = run(SynthOptions {
-            frames: 300,
-            seed,
-            noise_m: 0.002,
-            ..SynthOptions::default()
-        });
+        let rep = run(SynthOptions { frames: 300, seed, noise_m: 0.002, ..SynthOptions::default() });
         let (pe, se) = (rep.pose_error_deg.unwrap(), rep.scale_error_pct.unwrap());
         let rmse = rep.marker_rmse_mm.unwrap();
         eprintln!("2 mm, seed {seed}: pose rmse {:.3}° p90 {:.3}°, scale mean {:.3} % max {:.3} %, marker rmse p50 {:.2} mm, it {:?}", pe.rmse, pe.p90, se.mean, se.max, rmse.p50, rep.iterations);
@@ -53,15 +43,7 @@ fn two_millimetre_noise_keeps_joint_angles_within_a_degree_and_scales_within_a_p
 #[test]
 fn frames_without_markers_are_reported_and_bridged_while_the_rest_solve() {
     let ctx = Context::shipped().unwrap();
-    let mut s = synthesize(
-        &ctx.model,
-        &ctx.proxy,
-        &SynthOptions {
-            frames: 60,
-            seed: 4,
-            ..SynthOptions::default()
-        },
-    );
+    let mut s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 60, seed: 4, ..SynthOptions::default() });
     let nm = s.trial.n_markers();
     for f in [0usize, 30, 31] {
         for v in &mut s.trial.positions[f * nm * 3..(f + 1) * nm * 3] {
@@ -83,15 +65,7 @@ fn frames_without_markers_are_reported_and_bridged_while_the_rest_solve() {
 #[test]
 fn box_qp_and_clarabel_backends_reach_the_same_frame_solution() {
     let ctx = Context::shipped().unwrap();
-    let s = synthesize(
-        &ctx.model,
-        &ctx.proxy,
-        &SynthOptions {
-            frames: 5,
-            seed: 9,
-            ..SynthOptions::default()
-        },
-    );
+    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 5, seed: 9, ..SynthOptions::default() });
     let eval = ctx.evaluator();
     let stride = 3 * ctx.model.markers.len();
     let zeros = vec![0.0; ctx.model.ny()];
@@ -114,10 +88,7 @@ fn box_qp_and_clarabel_backends_reach_the_same_frame_solution() {
         out.push((st.energy, p));
     }
     let (e0, e1) = (out[0].0, out[1].0);
-    assert!(
-        (e0 - e1).abs() <= 1e-6 * e0.max(1e-12),
-        "energies {e0} vs {e1}"
-    );
+    assert!((e0 - e1).abs() <= 1e-6 * e0.max(1e-12), "energies {e0} vs {e1}");
     for (a, b) in out[0].1.iter().zip(&out[1].1) {
         assert!((a - b).abs() < 1e-3, "{a} vs {b}");
     }
@@ -129,12 +100,7 @@ fn cold_start_finds_a_subject_facing_backwards() {
     let s = synthesize(
         &ctx.model,
         &ctx.proxy,
-        &SynthOptions {
-            frames: 3,
-            seed: 21,
-            noise_m: 0.0,
-            ..SynthOptions::default()
-        },
+        &SynthOptions { frames: 3, seed: 21, noise_m: 0.0, ..SynthOptions::default() },
     );
     let eval = ctx.evaluator();
     let stride = 3 * ctx.model.markers.len();
@@ -161,4 +127,38 @@ fn cold_start_finds_a_subject_facing_backwards() {
     cold_start(&mut solver, &frame, &mut p);
     let st = solver.solve(&frame, &mut p);
     assert!(st.rmse_m < 1e-3, "RMSE {} m after a cold start", st.rmse_m);
+}
+
+#[test]
+fn scale_symmetry_constraint_holds_in_calibration_and_in_every_frame() {
+    use smocap::model::profile::Profile;
+    use smocap::pipeline::context::{SHIPPED_MODEL, SHIPPED_PROFILE};
+    let text = format!("{SHIPPED_PROFILE}\n[[constraint]]\nproxies = {{ femur_r = 1.0, femur_l = -1.0 }}\nmin = -0.01\nmax = 0.01\n");
+    let profile = Profile::parse(&text, std::path::Path::new("sym.toml")).unwrap();
+    let model = smocap::io::mjcf::parse_mjcf(SHIPPED_MODEL, "fullbody.xml").unwrap();
+    let ctx = Context::new(model, profile, "sym.toml", "test".into()).unwrap();
+    assert_eq!(ctx.settings.qp, QpBackend::Clarabel, "constraints need clarabel");
+    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 30, seed: 8, ..SynthOptions::default() });
+    let (r, l) = (ctx.proxy.proxy_index("femur_r").unwrap(), ctx.proxy.proxy_index("femur_l").unwrap());
+    let truth_gap = (s.truth.proxies[0][r] - s.truth.proxies[0][l]).abs();
+    let cal = calibrate_subject(&ctx, &[("t", &s.trial)]).unwrap();
+    let gap = cal.proxies[r] - cal.proxies[l];
+    eprintln!("truth gap {truth_gap:.4}, calibrated gap {gap:.4}");
+    assert!(gap.abs() <= 0.01 + 1e-6, "calibrated femur gap {gap}");
+    let res = solve_trial(&ctx, "t", &s.trial, &cal, 1).unwrap();
+    for p in &res.proxies {
+        assert!((p[r] - p[l]).abs() <= 0.01 + 1e-6, "frame gap {}", p[r] - p[l]);
+    }
+}
+
+#[test]
+fn a_constraint_naming_an_unknown_proxy_is_an_error_listing_the_proxies() {
+    use smocap::model::profile::Profile;
+    use smocap::model::proxy::ProxyMap;
+    let ctx = Context::shipped().unwrap();
+    let text = "[[constraint]]\nproxies = { femur_x = 1.0 }\nmax = 0.1\n";
+    let mut profile = Profile::parse(text, std::path::Path::new("c.toml")).unwrap();
+    profile.scale_groups = ctx.profile.scale_groups.clone();
+    let err = ProxyMap::new(&ctx.model, &profile).unwrap_err().to_string();
+    assert!(err.contains("femur_x") && err.contains("femur_r"), "{err}");
 }

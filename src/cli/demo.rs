@@ -23,12 +23,7 @@ pub struct DemoArgs {
 pub fn run(a: DemoArgs) -> anyhow::Result<u8> {
     let ctx = Context::shipped()?;
     let threads = a.threads.unwrap_or_else(super::default_threads).max(1);
-    let opt = SynthOptions {
-        frames: a.frames,
-        seed: a.seed,
-        noise_m: a.noise_mm * 1e-3,
-        ..SynthOptions::default()
-    };
+    let opt = SynthOptions { frames: a.frames, seed: a.seed, noise_m: a.noise_mm * 1e-3, ..SynthOptions::default() };
     println!(
         "smocap demo: shipped model '{}' ({} coordinates, {} bodies, {} markers, {} proxies), {} synthetic frames at {} Hz, {} mm noise, seed {}",
         ctx.model.name,
@@ -56,11 +51,11 @@ pub fn run(a: DemoArgs) -> anyhow::Result<u8> {
     print!("{}", report.table());
     let t = &report.trials[0];
     if let (Some(pe), Some(se)) = (t.pose_error_deg, t.scale_error_pct) {
-        println!("against the truth: joint angle RMSE {:.3}° (p90 {:.3}°), scale error mean {:.3} % (max {:.3} %)", pe.rmse, pe.p90, se.mean, se.max);
+        println!(
+            "against the truth: joint angle RMSE {:.3}° (p90 {:.3}°), scale error mean {:.3} % (max {:.3} %)",
+            pe.rmse, pe.p90, se.mean, se.max
+        );
     }
-    println!(
-        "{} threads; {:.0} frames/s wall",
-        threads, report.totals.frames_per_s
-    );
+    println!("{} threads; {:.0} frames/s wall", threads, report.totals.frames_per_s);
     Ok(0)
 }

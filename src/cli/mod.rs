@@ -14,11 +14,7 @@ use std::process::ExitCode;
 pub const EXIT_SOME_FAILED: u8 = 3;
 
 #[derive(Parser, Debug)]
-#[command(
-    name = "smocap",
-    version,
-    about = "Joint scale–pose canonicalization of marker-based motion capture"
-)]
+#[command(name = "smocap", version, about = "Joint scale–pose canonicalization of marker-based motion capture")]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
@@ -63,18 +59,10 @@ pub(crate) fn load_context(
     Ok(match model {
         None if profile.is_none() => Context::shipped()?,
         None => {
-            let m = crate::io::mjcf::parse_mjcf(
-                crate::pipeline::context::SHIPPED_MODEL,
-                "models/fullbody.xml",
-            )?;
+            let m = crate::io::mjcf::parse_mjcf(crate::pipeline::context::SHIPPED_MODEL, "models/fullbody.xml")?;
             let path = profile.unwrap_or(std::path::Path::new(""));
             let prof = crate::model::profile::Profile::read(path)?;
-            Context::new(
-                m,
-                prof,
-                &path.display().to_string(),
-                "shipped:models/fullbody.xml".into(),
-            )?
+            Context::new(m, prof, &path.display().to_string(), "shipped:models/fullbody.xml".into())?
         }
         Some(m) => {
             let ctx = Context::from_files(m, profile)?;
@@ -88,7 +76,5 @@ pub(crate) fn load_context(
 
 /// Default thread count: the machine's available parallelism.
 pub(crate) fn default_threads() -> usize {
-    std::thread::available_parallelism()
-        .map(|n| n.get())
-        .unwrap_or(1)
+    std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
 }

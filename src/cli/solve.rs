@@ -40,15 +40,16 @@ pub struct SolveArgs {
 pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
     let mut ctx = super::load_context(a.model.as_deref(), a.profile.as_deref())?;
     if let Some(qp) = a.qp {
-        ctx.settings.qp = qp;
+        ctx.settings.qp = crate::solve::backend_for(qp, &ctx.proxy);
+        if ctx.settings.qp != qp {
+            eprintln!("note: the profile has general linear constraints, which only the clarabel QP backend solves");
+        }
     }
     let threads = a.threads.unwrap_or_else(super::default_threads).max(1);
     let truth: Option<Truth> = match &a.truth {
         Some(p) => Some(
-            serde_json::from_str(
-                &std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?,
-            )
-            .with_context(|| format!("parsing truth {}", p.display()))?,
+            serde_json::from_str(&std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?)
+                .with_context(|| format!("parsing truth {}", p.display()))?,
         ),
         None => None,
     };
@@ -65,16 +66,12 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
             Err(e) => report.push(Report::failed(&name, e.to_string())),
         }
     }
-    let calibration_input: Vec<(&str, &crate::io::MarkerTrial)> =
-        match (&a.static_trial, &static_trial) {
-            (Some(p), Some(st)) => vec![(p.to_str().unwrap_or("static"), st)],
-            _ => loaded.iter().map(|(n, t)| (n.as_str(), t)).collect(),
-        };
-    let calibration = if calibration_input.is_empty() {
-        None
-    } else {
-        Some(calibrate_subject(&ctx, &calibration_input))
+    let calibration_input: Vec<(&str, &crate::io::MarkerTrial)> = match (&a.static_trial, &static_trial) {
+        (Some(p), Some(st)) => vec![(p.to_str().unwrap_or("static"), st)],
+        _ => loaded.iter().map(|(n, t)| (n.as_str(), t)).collect(),
     };
+    let calibration =
+        if calibration_input.is_empty() { None } else { Some(calibrate_subject(&ctx, &calibration_input)) };
     for (name, t) in &loaded {
         let result = match &calibration {
             Some(Ok(c)) => solve_trial(&ctx, name, t, c, threads).map_err(|e| e.to_string()),
@@ -84,7 +81,10 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         match result {
             Ok(r) => {
                 for &f in &r.bridged {
-                    eprintln!("{name}: frame {} has fewer than {} observed markers; bridged from its neighbours", f, ctx.settings.min_markers);
+                    eprintln!(
+                        "{name}: frame {} has fewer than {} observed markers; bridged from its neighbours",
+                        f, ctx.settings.min_markers
+                    );
                 }
                 report.push(trial_report(&ctx, &r, truth.as_ref()));
             }
@@ -102,12 +102,7 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         if failed == report.trials.len() {
             anyhow::bail!(
                 "every trial failed: {}",
-                report
-                    .trials
-                    .iter()
-                    .filter_map(|t| t.error.clone())
-                    .collect::<Vec<_>>()
-                    .join("; ")
+                report.trials.iter().filter_map(|t| t.error.clone()).collect::<Vec<_>>().join("; ")
             );
         }
         return Ok(super::EXIT_SOME_FAILED);

@@ -61,19 +61,11 @@ impl SynthArgs {
 }
 
 pub fn run(a: SynthArgs) -> anyhow::Result<u8> {
-    anyhow::ensure!(
-        (0.0..1.0).contains(&a.dropout),
-        "--dropout must be in [0, 1), got {}",
-        a.dropout
-    );
-    anyhow::ensure!(
-        a.frames > 0 && a.rate > 0.0,
-        "--frames and --rate must be positive"
-    );
+    anyhow::ensure!((0.0..1.0).contains(&a.dropout), "--dropout must be in [0, 1), got {}", a.dropout);
+    anyhow::ensure!(a.frames > 0 && a.rate > 0.0, "--frames and --rate must be positive");
     let ctx = super::load_context(a.model.as_deref(), a.profile.as_deref())?;
     let s = synthesize(&ctx.model, &ctx.proxy, &a.options());
-    trc::write_trc(&a.out, &s.trial, "mm")
-        .with_context(|| format!("writing {}", a.out.display()))?;
+    trc::write_trc(&a.out, &s.trial, "mm").with_context(|| format!("writing {}", a.out.display()))?;
     let json = serde_json::to_string_pretty(&s.truth)?;
     std::fs::write(&a.truth, json).with_context(|| format!("writing {}", a.truth.display()))?;
     eprintln!(

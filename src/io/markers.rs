@@ -84,13 +84,7 @@ impl MarkerTrial {
 
     /// Number of gap frames for each marker, in label order.
     pub fn gap_counts(&self) -> Vec<usize> {
-        (0..self.n_markers())
-            .map(|m| {
-                (0..self.n_frames())
-                    .filter(|&f| self.position(f, m).is_none())
-                    .count()
-            })
-            .collect()
+        (0..self.n_markers()).map(|m| (0..self.n_frames()).filter(|&f| self.position(f, m).is_none()).count()).collect()
     }
 
     /// Time from the first to the last frame in seconds (0 with fewer than two frames).
@@ -112,11 +106,7 @@ impl MarkerTrial {
             labels: self.labels.clone(),
             rate_hz: self.rate_hz,
             times: self.times[lo..hi].to_vec(),
-            frame_numbers: self
-                .frame_numbers
-                .get(lo..hi)
-                .map(<[i64]>::to_vec)
-                .unwrap_or_default(),
+            frame_numbers: self.frame_numbers.get(lo..hi).map(<[i64]>::to_vec).unwrap_or_default(),
             positions: self.positions[pos_lo..pos_hi].to_vec(),
             source_units: self.source_units.clone(),
             warnings: self.warnings.clone(),
@@ -128,10 +118,7 @@ impl MarkerTrial {
     pub fn check_consistent(&self) -> Result<(), String> {
         let (nf, nm) = (self.n_frames(), self.n_markers());
         if self.frame_numbers.len() != nf {
-            return Err(format!(
-                "{} frame numbers for {nf} times",
-                self.frame_numbers.len()
-            ));
+            return Err(format!("{} frame numbers for {nf} times", self.frame_numbers.len()));
         }
         if self.positions.len() != nf * nm * 3 {
             return Err(format!(

@@ -48,8 +48,8 @@
 mod attrs;
 
 use crate::model::{
-    Body, Coordinate, CoordinateCoupling, CoordinateKind, Function, Joint, Marker, Model,
-    ModelError, Motion, MotionKind,
+    Body, Coordinate, CoordinateCoupling, CoordinateKind, Function, Joint, Marker, Model, ModelError, Motion,
+    MotionKind,
 };
 use attrs::{Attrs, Ctx};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
@@ -61,25 +61,11 @@ use std::path::Path;
 #[derive(Debug, thiserror::Error)]
 pub enum MjcfError {
     #[error("{file}: cannot read: {source}")]
-    Io {
-        file: String,
-        source: std::io::Error,
-    },
+    Io { file: String, source: std::io::Error },
     #[error("{file}:{line}:{column}: malformed XML: {message}")]
-    Xml {
-        file: String,
-        line: u32,
-        column: u32,
-        message: String,
-    },
+    Xml { file: String, line: u32, column: u32, message: String },
     #[error("{file}:{line}:{column}: <{element}>: {message}")]
-    Element {
-        file: String,
-        line: u32,
-        column: u32,
-        element: String,
-        message: String,
-    },
+    Element { file: String, line: u32, column: u32, element: String, message: String },
     #[error("{file}: invalid model: {source}")]
     Model { file: String, source: ModelError },
 }
@@ -97,10 +83,7 @@ impl MjcfError {
 /// Reads an MJCF file; returns the model and the warnings about ignored content.
 pub fn read_mjcf(path: &Path) -> Result<(Model, Vec<String>), MjcfError> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|source| MjcfError::Io {
-        file: file.clone(),
-        source,
-    })?;
+    let text = std::fs::read_to_string(path).map_err(|source| MjcfError::Io { file: file.clone(), source })?;
     parse_mjcf_with_warnings(&text, &file)
 }
 
@@ -110,40 +93,19 @@ pub fn parse_mjcf(text: &str, file_name: &str) -> Result<Model, MjcfError> {
 }
 
 /// Like [`parse_mjcf`], also returning the warnings about ignored content.
-pub fn parse_mjcf_with_warnings(
-    text: &str,
-    file_name: &str,
-) -> Result<(Model, Vec<String>), MjcfError> {
+pub fn parse_mjcf_with_warnings(text: &str, file_name: &str) -> Result<(Model, Vec<String>), MjcfError> {
     let doc = Document::parse(text).map_err(|e| {
         let p = e.pos();
-        MjcfError::Xml {
-            file: file_name.to_string(),
-            line: p.row,
-            column: p.col,
-            message: e.to_string(),
-        }
+        MjcfError::Xml { file: file_name.to_string(), line: p.row, column: p.col, message: e.to_string() }
     })?;
     let mut ctx = Ctx::new(&doc, file_name);
     let root = doc.root_element();
     if root.tag_name().name() != "mujoco" {
         return Err(ctx.err(root, "expected the root element <mujoco>"));
     }
-    const UNSUPPORTED: [&str; 6] = [
-        "include",
-        "frame",
-        "composite",
-        "flexcomp",
-        "replicate",
-        "attach",
-    ];
-    if let Some(n) = root
-        .descendants()
-        .find(|n| UNSUPPORTED.contains(&n.tag_name().name()) && n.is_element())
-    {
-        return Err(ctx.err(
-            n,
-            "element not supported by this importer (it changes the kinematics)",
-        ));
+    const UNSUPPORTED: [&str; 6] = ["include", "frame", "composite", "flexcomp", "replicate", "attach"];
+    if let Some(n) = root.descendants().find(|n| UNSUPPORTED.contains(&n.tag_name().name()) && n.is_element()) {
+        return Err(ctx.err(n, "element not supported by this importer (it changes the kinematics)"));
     }
     for c in root.children().filter(|n| n.has_tag_name("compiler")) {
         ctx.read_compiler(c)?;
@@ -158,22 +120,12 @@ pub fn parse_mjcf_with_warnings(
             b.equality(c)?;
         }
     }
-    let stem = Path::new(file_name)
-        .file_stem()
-        .and_then(|s| s.to_str())
-        .unwrap_or("mujoco");
+    let stem = Path::new(file_name).file_stem().and_then(|s| s.to_str()).unwrap_or("mujoco");
     let name = root.attribute("model").unwrap_or(stem);
     let file = b.ctx.file.to_string();
     let warnings = std::mem::take(&mut b.ctx.warnings);
-    let model = Model::new(
-        name,
-        b.bodies,
-        b.motions,
-        b.coordinates,
-        b.markers,
-        b.couplings,
-    )
-    .map_err(|source| MjcfError::Model { file, source })?;
+    let model = Model::new(name, b.bodies, b.motions, b.coordinates, b.markers, b.couplings)
+        .map_err(|source| MjcfError::Model { file, source })?;
     Ok((model, warnings))
 }
 
@@ -220,49 +172,29 @@ impl<'a> Builder<'a> {
     fn new(ctx: Ctx<'a>) -> Builder<'a> {
         let (bodies, motions, coordinates, markers, couplings) = Default::default();
         let (body_nodes, joints, names) = Default::default();
-        Builder {
-            ctx,
-            bodies,
-            motions,
-            coordinates,
-            markers,
-            couplings,
-            body_nodes,
-            joints,
-            names,
-        }
+        Builder { ctx, bodies, motions, coordinates, markers, couplings, body_nodes, joints, names }
     }
 
     /// Visits every element under one `worldbody` in document order.
     fn walk(&mut self, wb: Node<'a, 'a>) -> Result<(), MjcfError> {
         for node in wb.descendants().filter(|n| n.is_element() && *n != wb) {
             let tag = node.tag_name().name();
-            let parent = node
-                .parent_element()
-                .map(|p| p.tag_name().name())
-                .unwrap_or("");
+            let parent = node.parent_element().map(|p| p.tag_name().name()).unwrap_or("");
             let in_body = parent == "body" || parent == "worldbody";
             match tag {
                 "body" | "joint" | "freejoint" | "site" if !in_body => {
-                    return Err(self.ctx.err(
-                        node,
-                        format!("must be a child of <body> or <worldbody>, not <{parent}>"),
-                    ));
+                    return Err(self
+                        .ctx
+                        .err(node, format!("must be a child of <body> or <worldbody>, not <{parent}>")));
                 }
                 "body" => self.body(node)?,
                 "joint" | "freejoint" if parent == "worldbody" => {
-                    return Err(self
-                        .ctx
-                        .err(node, "joints cannot be attached to <worldbody>"));
+                    return Err(self.ctx.err(node, "joints cannot be attached to <worldbody>"));
                 }
                 "site" if parent == "worldbody" => {
-                    self.ctx.warn(
-                        node,
-                        "site on <worldbody> skipped (markers must be on a body)",
-                    );
+                    self.ctx.warn(node, "site on <worldbody> skipped (markers must be on a body)");
                 }
-                "joint" | "freejoint" | "site" | "geom" | "inertial" | "camera" | "light"
-                | "plugin" => {}
+                "joint" | "freejoint" | "site" | "geom" | "inertial" | "camera" | "light" | "plugin" => {}
                 _ if in_body => self.ctx.warn(node, "unknown element ignored"),
                 _ => {}
             }
@@ -272,25 +204,18 @@ impl<'a> Builder<'a> {
 
     fn unique(&mut self, what: &'static str, name: &str, node: Node) -> Result<(), MjcfError> {
         if !self.names.insert((what, name.to_string())) {
-            return Err(self
-                .ctx
-                .err(node, format!("duplicate {what} name '{name}'")));
+            return Err(self.ctx.err(node, format!("duplicate {what} name '{name}'")));
         }
         Ok(())
     }
 
     fn body(&mut self, node: Node<'a, 'a>) -> Result<(), MjcfError> {
         let index = self.bodies.len();
-        let (parent, inherited) = match node
-            .parent_element()
-            .and_then(|p| self.body_nodes.get(&p.id()))
-        {
+        let (parent, inherited) = match node.parent_element().and_then(|p| self.body_nodes.get(&p.id())) {
             Some(&(p, class)) => (Some(p), class),
             None => (None, "main"),
         };
-        let name = node
-            .attribute("name")
-            .map_or_else(|| format!("body{}", index + 1), str::to_string);
+        let name = node.attribute("name").map_or_else(|| format!("body{}", index + 1), str::to_string);
         self.unique("body", &name, node)?;
         let class = match node.attribute("childclass") {
             Some(c) => self.ctx.class_name(node, c)?,
@@ -302,29 +227,17 @@ impl<'a> Builder<'a> {
         let rot = self.ctx.orientation(node, &own)?;
 
         let mut specs = Vec::new();
-        for (i, j) in node
-            .children()
-            .filter(|n| n.has_tag_name("joint") || n.has_tag_name("freejoint"))
-            .enumerate()
-        {
+        for (i, j) in node.children().filter(|n| n.has_tag_name("joint") || n.has_tag_name("freejoint")).enumerate() {
             specs.push((j, self.joint_spec(j, class, &name, i)?));
         }
         if specs.len() > 1 && specs.iter().any(|(_, s)| s.kind == JointType::Free) {
-            return Err(self
-                .ctx
-                .err(node, "a free joint must be the only joint of its body"));
+            return Err(self.ctx.err(node, "a free joint must be the only joint of its body"));
         }
         let mut anchor: Option<Vector3<f64>> = None;
-        for (j, s) in specs
-            .iter()
-            .filter(|(_, s)| matches!(s.kind, JointType::Hinge | JointType::Ball))
-        {
+        for (j, s) in specs.iter().filter(|(_, s)| matches!(s.kind, JointType::Hinge | JointType::Ball)) {
             match anchor {
                 Some(a) if a != s.pos => {
-                    return Err(self.ctx.err(
-                        *j,
-                        "joints of one body with different 'pos' anchors are not supported",
-                    ));
+                    return Err(self.ctx.err(*j, "joints of one body with different 'pos' anchors are not supported"));
                 }
                 _ => anchor = Some(s.pos),
             }
@@ -339,20 +252,9 @@ impl<'a> Builder<'a> {
             }
             self.emit_joint(*j, s, pos, rot)?;
         }
-        let joint_name = specs
-            .first()
-            .map_or_else(|| name.clone(), |(_, s)| s.name.clone());
-        let joint = Joint {
-            name: joint_name,
-            parent_offset,
-            child_offset,
-            motions: start..self.motions.len(),
-        };
-        self.bodies.push(Body {
-            name,
-            parent,
-            joint,
-        });
+        let joint_name = specs.first().map_or_else(|| name.clone(), |(_, s)| s.name.clone());
+        let joint = Joint { name: joint_name, parent_offset, child_offset, motions: start..self.motions.len() };
+        self.bodies.push(Body { name, parent, joint });
 
         for site in node.children().filter(|n| n.has_tag_name("site")) {
             self.site(site, class, index)?;
@@ -360,60 +262,34 @@ impl<'a> Builder<'a> {
         Ok(())
     }
 
-    fn joint_spec(
-        &mut self,
-        j: Node<'a, 'a>,
-        class: &'a str,
-        body: &str,
-        i: usize,
-    ) -> Result<JointSpec, MjcfError> {
-        let name = j
-            .attribute("name")
-            .map_or_else(|| format!("{body}_joint{i}"), str::to_string);
+    fn joint_spec(&mut self, j: Node<'a, 'a>, class: &'a str, body: &str, i: usize) -> Result<JointSpec, MjcfError> {
+        let name = j.attribute("name").map_or_else(|| format!("{body}_joint{i}"), str::to_string);
         if j.has_tag_name("freejoint") {
             let (axis, pos) = (Vector3::z(), Vector3::zeros());
-            return Ok(JointSpec {
-                name,
-                kind: JointType::Free,
-                axis,
-                pos,
-                limits: None,
-                reference: 0.0,
-            });
+            return Ok(JointSpec { name, kind: JointType::Free, axis, pos, limits: None, reference: 0.0 });
         }
         let a = self.ctx.resolve(j, class, |c| &c.joint)?;
-        let kind =
-            match a.get("type").map_or("hinge", |v| v.1) {
-                "hinge" => JointType::Hinge,
-                "slide" => JointType::Slide,
-                "ball" => JointType::Ball,
-                "free" => JointType::Free,
-                other => return Err(self.ctx.err_at(
+        let kind = match a.get("type").map_or("hinge", |v| v.1) {
+            "hinge" => JointType::Hinge,
+            "slide" => JointType::Slide,
+            "ball" => JointType::Ball,
+            "free" => JointType::Free,
+            other => {
+                return Err(self.ctx.err_at(
                     a.pos("type", j),
                     "joint",
-                    format!(
-                        "unknown joint type '{other}': expected one of hinge, slide, ball, free"
-                    ),
-                )),
-            };
+                    format!("unknown joint type '{other}': expected one of hinge, slide, ball, free"),
+                ))
+            }
+        };
         let angular = matches!(kind, JointType::Hinge | JointType::Ball);
         let unit = if angular { self.ctx.angle } else { 1.0 };
         let axis = self.ctx.vec3(j, &a, "axis")?.unwrap_or_else(Vector3::z);
-        if kind != JointType::Ball
-            && kind != JointType::Free
-            && !(axis.norm() > 1e-12 && axis.norm().is_finite())
-        {
-            return Err(self.ctx.err_at(
-                a.pos("axis", j),
-                "joint",
-                "axis must be a non-zero finite vector",
-            ));
+        if kind != JointType::Ball && kind != JointType::Free && !(axis.norm() > 1e-12 && axis.norm().is_finite()) {
+            return Err(self.ctx.err_at(a.pos("axis", j), "joint", "axis must be a non-zero finite vector"));
         }
         let pos = self.ctx.vec3(j, &a, "pos")?.unwrap_or_default();
-        let reference = self
-            .ctx
-            .nums::<1>(j, &a, "ref")?
-            .map_or(0.0, |[r]| r * unit);
+        let reference = self.ctx.nums::<1>(j, &a, "ref")?.map_or(0.0, |[r]| r * unit);
         let range = self.ctx.nums::<2>(j, &a, "range")?;
         let has_range = range.is_some_and(|r| r != [0.0, 0.0]);
         let limited = match a.get("limited").map_or("auto", |v| v.1) {
@@ -438,33 +314,14 @@ impl<'a> Builder<'a> {
         };
         let limits = match (limited && kind != JointType::Free, range) {
             (false, _) => None,
-            (true, Some([_, hi])) if kind == JointType::Ball && hi > 0.0 => {
-                Some((-hi * unit, hi * unit))
-            }
-            (true, Some([lo, hi])) if kind != JointType::Ball && lo < hi => {
-                Some((lo * unit, hi * unit))
-            }
+            (true, Some([_, hi])) if kind == JointType::Ball && hi > 0.0 => Some((-hi * unit, hi * unit)),
+            (true, Some([lo, hi])) if kind != JointType::Ball && lo < hi => Some((lo * unit, hi * unit)),
             _ => {
-                let need = if kind == JointType::Ball {
-                    "'0 max' with max > 0"
-                } else {
-                    "lo < hi"
-                };
-                return Err(self.ctx.err_at(
-                    a.pos("range", j),
-                    "joint",
-                    format!("limited joint needs a range {need}"),
-                ));
+                let need = if kind == JointType::Ball { "'0 max' with max > 0" } else { "lo < hi" };
+                return Err(self.ctx.err_at(a.pos("range", j), "joint", format!("limited joint needs a range {need}")));
             }
         };
-        Ok(JointSpec {
-            name,
-            kind,
-            axis,
-            pos,
-            limits,
-            reference,
-        })
+        Ok(JointSpec { name, kind, axis, pos, limits, reference })
     }
 
     /// Appends the motions and coordinates of one MJCF joint; `pos`/`rot` is the body frame.
@@ -486,58 +343,26 @@ impl<'a> Builder<'a> {
                 .collect(),
             JointType::Free => {
                 let (roll, pitch, yaw) = rot.euler_angles();
-                let t = [("tx", x, pos.x), ("ty", y, pos.y), ("tz", z, pos.z)]
-                    .map(|(n, a, v)| (n, Translation, a, v));
-                let r = [("rz", z, yaw), ("ry", y, pitch), ("rx", x, roll)]
-                    .map(|(n, a, v)| (n, Rotation, a, v));
-                t.into_iter()
-                    .chain(r)
-                    .map(|(n, k, a, v)| (format!("{}_{n}", s.name), k, a, v))
-                    .collect()
+                let t = [("tx", x, pos.x), ("ty", y, pos.y), ("tz", z, pos.z)].map(|(n, a, v)| (n, Translation, a, v));
+                let r = [("rz", z, yaw), ("ry", y, pitch), ("rx", x, roll)].map(|(n, a, v)| (n, Rotation, a, v));
+                t.into_iter().chain(r).map(|(n, k, a, v)| (format!("{}_{n}", s.name), k, a, v)).collect()
             }
         };
         let free = s.kind == JointType::Free;
         for (name, kind, axis, default) in parts {
             self.unique("coordinate", &name, j)?;
             let coordinate = self.coordinates.len();
-            let func = if free {
-                Function::IDENTITY
-            } else {
-                Function::Linear {
-                    slope: 1.0,
-                    intercept: -default,
-                }
-            };
-            self.motions.push(Motion {
-                kind,
-                axis,
-                coordinate: Some(coordinate),
-                func,
-                parent_scale_weights: None,
-            });
-            let kind = if kind == Rotation {
-                Rotational
-            } else {
-                Translational
-            };
+            let func = if free { Function::IDENTITY } else { Function::Linear { slope: 1.0, intercept: -default } };
+            self.motions.push(Motion { kind, axis, coordinate: Some(coordinate), func, parent_scale_weights: None });
+            let kind = if kind == Rotation { Rotational } else { Translational };
             let range = s.limits.unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
             let clamped = s.limits.is_some();
-            self.coordinates.push(Coordinate {
-                name,
-                kind,
-                default,
-                range,
-                locked: false,
-                clamped,
-            });
+            self.coordinates.push(Coordinate { name, kind, default, range, locked: false, clamped });
         }
         if let Some(explicit) = j.attribute("name") {
             self.unique("joint", explicit, j)?;
             let scalar = matches!(s.kind, JointType::Hinge | JointType::Slide);
-            let entry = scalar.then(|| ScalarJoint {
-                coordinate: self.coordinates.len() - 1,
-                reference: s.reference,
-            });
+            let entry = scalar.then(|| ScalarJoint { coordinate: self.coordinates.len() - 1, reference: s.reference });
             self.joints.insert(explicit.to_string(), entry);
         }
         Ok(())
@@ -553,21 +378,13 @@ impl<'a> Builder<'a> {
             Some(f) => (Vector3::new(f[0], f[1], f[2]) + Vector3::new(f[3], f[4], f[5])) / 2.0,
             None => self.ctx.vec3(site, &a, "pos")?.unwrap_or_default(),
         };
-        self.markers.push(Marker {
-            name: name.to_string(),
-            body,
-            offset,
-            weight: 1.0,
-        });
+        self.markers.push(Marker { name: name.to_string(), body, offset, weight: 1.0 });
         Ok(())
     }
 
     fn equality(&mut self, e: Node<'a, 'a>) -> Result<(), MjcfError> {
         if !e.has_tag_name("joint") {
-            self.ctx.warn(
-                e,
-                "equality constraint ignored (only <joint> equalities are imported)",
-            );
+            self.ctx.warn(e, "equality constraint ignored (only <joint> equalities are imported)");
             return Ok(());
         }
         let own = Attrs::own(e);
@@ -618,11 +435,7 @@ impl<'a> Builder<'a> {
         }
         let func = Function::Polynomial { coefficients };
         self.coordinates[a].default = func.eval(self.coordinates[b].default).0;
-        self.couplings.push(CoordinateCoupling {
-            dependent: a,
-            independent: b,
-            func,
-        });
+        self.couplings.push(CoordinateCoupling { dependent: a, independent: b, func });
         Ok(())
     }
 

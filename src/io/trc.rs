@@ -14,43 +14,17 @@ use super::markers::{units_to_metres, MarkerTrial};
 #[derive(Debug, thiserror::Error)]
 pub enum TrcError {
     #[error("{file}: {source}")]
-    Io {
-        file: String,
-        source: std::io::Error,
-    },
+    Io { file: String, source: std::io::Error },
     #[error("{file}:{line}: missing or malformed header: expected {expected}")]
-    MissingHeader {
-        file: String,
-        line: usize,
-        expected: String,
-    },
+    MissingHeader { file: String, line: usize, expected: String },
     #[error("{file}:{line}: header field {field} = {value:?} is not a positive number")]
-    BadHeaderValue {
-        file: String,
-        line: usize,
-        field: String,
-        value: String,
-    },
+    BadHeaderValue { file: String, line: usize, field: String, value: String },
     #[error("{file}:{line}: unknown units {units:?} (expected mm, cm, m or in)")]
-    UnknownUnits {
-        file: String,
-        line: usize,
-        units: String,
-    },
+    UnknownUnits { file: String, line: usize, units: String },
     #[error("{file}:{line}: column {column} is not a number: {value:?}")]
-    NonNumeric {
-        file: String,
-        line: usize,
-        column: usize,
-        value: String,
-    },
+    NonNumeric { file: String, line: usize, column: usize, value: String },
     #[error("{file}:{line}: row has {found} coordinate cells but {n_markers} markers allow {}", 3 * n_markers)]
-    RaggedRow {
-        file: String,
-        line: usize,
-        found: usize,
-        n_markers: usize,
-    },
+    RaggedRow { file: String, line: usize, found: usize, n_markers: usize },
     #[error("{file}:{line}: no data rows")]
     NoData { file: String, line: usize },
     #[error("{file}: cannot write trial: {what}")]
@@ -75,16 +49,11 @@ impl TrcError {
 /// Reads a TRC file; positions in metres. Non-UTF-8 bytes are replaced (with a warning).
 pub fn read_trc(path: &Path) -> Result<MarkerTrial, TrcError> {
     let file = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| TrcError::Io {
-        file: file.clone(),
-        source,
-    })?;
+    let bytes = std::fs::read(path).map_err(|source| TrcError::Io { file: file.clone(), source })?;
     let text = String::from_utf8_lossy(&bytes);
     let mut trial = parse_trc(&text, &file)?;
     if matches!(text, std::borrow::Cow::Owned(_)) {
-        trial
-            .warnings
-            .push("file is not valid UTF-8; bad bytes replaced".into());
+        trial.warnings.push("file is not valid UTF-8; bad bytes replaced".into());
     }
     Ok(trial)
 }
@@ -107,66 +76,35 @@ fn cells(line: &str) -> Vec<&str> {
 }
 
 /// Header name/value pairs of lines 2 and 3, tolerant of doubled tabs.
-fn header_pairs(
-    names_line: &str,
-    values_line: &str,
-    warnings: &mut Vec<String>,
-) -> Vec<(String, String)> {
-    let names: Vec<&str> = names_line
-        .split('\t')
-        .flat_map(str::split_whitespace)
-        .collect();
+fn header_pairs(names_line: &str, values_line: &str, warnings: &mut Vec<String>) -> Vec<(String, String)> {
+    let names: Vec<&str> = names_line.split('\t').flat_map(str::split_whitespace).collect();
     let by_tab: Vec<&str> = values_line.trim_end().split('\t').map(str::trim).collect();
-    let values: Vec<&str> = if by_tab.len() == names.len() {
-        by_tab
-    } else {
-        values_line.split_whitespace().collect()
-    };
+    let values: Vec<&str> = if by_tab.len() == names.len() { by_tab } else { values_line.split_whitespace().collect() };
     if values.len() != names.len() {
-        warnings.push(format!(
-            "header has {} field names but {} values",
-            names.len(),
-            values.len()
-        ));
+        warnings.push(format!("header has {} field names but {} values", names.len(), values.len()));
     }
-    names
-        .iter()
-        .zip(values)
-        .map(|(n, v)| (n.to_string(), v.to_string()))
-        .collect()
+    names.iter().zip(values).map(|(n, v)| (n.to_string(), v.to_string())).collect()
 }
 
 /// Marker labels of line 4: at columns 2, 5, 8, ... (0-based), each followed by two
 /// empty cells; labels off that grid are taken in order with a warning.
 fn labels_of(line: &str, warnings: &mut Vec<String>) -> Vec<String> {
     let c = cells(line.trim_end());
-    let named: Vec<(usize, &str)> = c
-        .iter()
-        .enumerate()
-        .skip(2)
-        .filter(|(_, s)| !s.is_empty())
-        .map(|(i, s)| (i, *s))
-        .collect();
+    let named: Vec<(usize, &str)> =
+        c.iter().enumerate().skip(2).filter(|(_, s)| !s.is_empty()).map(|(i, s)| (i, *s)).collect();
     if named.iter().any(|(i, _)| (i - 2) % 3 != 0) {
-        warnings
-            .push("marker labels are not each followed by two empty cells; taken in order".into());
+        warnings.push("marker labels are not each followed by two empty cells; taken in order".into());
         return named.iter().map(|(_, s)| s.to_string()).collect();
     }
     let n = c.len().saturating_sub(2).div_ceil(3);
     (0..n)
-        .map(
-            |m| match c.get(2 + 3 * m).copied().filter(|s| !s.is_empty()) {
-                Some(s) => s.to_string(),
-                None => {
-                    warnings.push(format!(
-                        "marker {} has no label; named Unnamed{}",
-                        m + 1,
-                        m + 1
-                    ));
-                    format!("Unnamed{}", m + 1)
-                }
-            },
-        )
+        .map(|m| match c.get(2 + 3 * m).copied().filter(|s| !s.is_empty()) {
+            Some(s) => s.to_string(),
+            None => {
+                warnings.push(format!("marker {} has no label; named Unnamed{}", m + 1, m + 1));
+                format!("Unnamed{}", m + 1)
+            }
+        })
         .collect()
 }
 
@@ -194,37 +132,18 @@ pub fn parse_trc(text: &str, name_for_errors: &str) -> Result<MarkerTrial, TrcEr
     let file = name_for_errors.to_string();
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let lines: Vec<&str> = text.lines().collect();
-    let missing = |line: usize, expected: &str| TrcError::MissingHeader {
-        file: file.clone(),
-        line,
-        expected: expected.into(),
-    };
+    let missing =
+        |line: usize, expected: &str| TrcError::MissingHeader { file: file.clone(), line, expected: expected.into() };
     let mut warnings = Vec::new();
 
-    if !lines
-        .first()
-        .is_some_and(|l| l.trim_start().starts_with("PathFileType"))
-    {
+    if !lines.first().is_some_and(|l| l.trim_start().starts_with("PathFileType")) {
         return Err(missing(1, "a `PathFileType` line"));
     }
-    let names_line = lines
-        .get(1)
-        .ok_or_else(|| missing(2, "header field names (DataRate ... Units ...)"))?;
-    let values_line = lines
-        .get(2)
-        .ok_or_else(|| missing(3, "header field values"))?;
+    let names_line = lines.get(1).ok_or_else(|| missing(2, "header field names (DataRate ... Units ...)"))?;
+    let values_line = lines.get(2).ok_or_else(|| missing(3, "header field values"))?;
     let pairs = header_pairs(names_line, values_line, &mut warnings);
-    let field = |name: &str| {
-        pairs
-            .iter()
-            .find(|(n, _)| n.eq_ignore_ascii_case(name))
-            .map(|(_, v)| v.as_str())
-    };
-    let has_name = |name: &str| {
-        names_line
-            .split_whitespace()
-            .any(|n| n.eq_ignore_ascii_case(name))
-    };
+    let field = |name: &str| pairs.iter().find(|(n, _)| n.eq_ignore_ascii_case(name)).map(|(_, v)| v.as_str());
+    let has_name = |name: &str| names_line.split_whitespace().any(|n| n.eq_ignore_ascii_case(name));
 
     let (rate_name, rate_str) = match (field("DataRate"), field("CameraRate")) {
         (Some(v), _) => ("DataRate", v),
@@ -235,16 +154,9 @@ pub fn parse_trc(text: &str, name_for_errors: &str) -> Result<MarkerTrial, TrcEr
         _ if has_name("DataRate") => return Err(missing(3, "a value for DataRate")),
         _ => return Err(missing(2, "a DataRate field")),
     };
-    let rate_hz = rate_str
-        .parse::<f64>()
-        .ok()
-        .filter(|r| r.is_finite() && *r > 0.0)
-        .ok_or_else(|| TrcError::BadHeaderValue {
-            file: file.clone(),
-            line: 3,
-            field: rate_name.into(),
-            value: clip(rate_str),
-        })?;
+    let rate_hz = rate_str.parse::<f64>().ok().filter(|r| r.is_finite() && *r > 0.0).ok_or_else(|| {
+        TrcError::BadHeaderValue { file: file.clone(), line: 3, field: rate_name.into(), value: clip(rate_str) }
+    })?;
     let units = match field("Units") {
         Some(u) => u.to_string(),
         None if has_name("Units") => return Err(missing(3, "a value for Units")),
@@ -256,14 +168,8 @@ pub fn parse_trc(text: &str, name_for_errors: &str) -> Result<MarkerTrial, TrcEr
         units: clip(&units),
     })?;
 
-    let label_line = lines
-        .get(3)
-        .ok_or_else(|| missing(4, "the `Frame# Time <labels>` line"))?;
-    if !label_line
-        .trim_start()
-        .to_ascii_lowercase()
-        .starts_with("frame")
-    {
+    let label_line = lines.get(3).ok_or_else(|| missing(4, "the `Frame# Time <labels>` line"))?;
+    if !label_line.trim_start().to_ascii_lowercase().starts_with("frame") {
         return Err(missing(4, "the `Frame# Time <labels>` line"));
     }
     let labels = labels_of(label_line, &mut warnings);
@@ -273,9 +179,7 @@ pub fn parse_trc(text: &str, name_for_errors: &str) -> Result<MarkerTrial, TrcEr
     }
     if let Some(n) = field("NumMarkers").and_then(|v| v.parse::<f64>().ok()) {
         if n != nm as f64 {
-            warnings.push(format!(
-                "NumMarkers says {n} but line 4 has {nm} labels; using the labels"
-            ));
+            warnings.push(format!("NumMarkers says {n} but line 4 has {nm} labels; using the labels"));
         }
     }
 
@@ -290,19 +194,12 @@ pub fn parse_trc(text: &str, name_for_errors: &str) -> Result<MarkerTrial, TrcEr
             first_data = 5;
             let n_axes = c.iter().filter(|s| !s.is_empty()).count();
             if n_axes != 3 * nm && !l5.trim().is_empty() {
-                warnings.push(format!(
-                    "line 5 names {n_axes} coordinates for {nm} markers"
-                ));
+                warnings.push(format!("line 5 names {n_axes} coordinates for {nm} markers"));
             }
         }
     }
 
-    let mut trial = MarkerTrial {
-        labels,
-        rate_hz,
-        source_units: units,
-        ..MarkerTrial::default()
-    };
+    let mut trial = MarkerTrial { labels, rate_hz, source_units: units, ..MarkerTrial::default() };
     let mut time_warned = false;
     let per_m = per_metre(scale);
     for (idx, raw) in lines.iter().enumerate().skip(first_data) {
@@ -312,28 +209,15 @@ pub fn parse_trc(text: &str, name_for_errors: &str) -> Result<MarkerTrial, TrcEr
             continue;
         }
         let c = cells(row);
-        let non_numeric = |column: usize, value: &str| TrcError::NonNumeric {
-            file: file.clone(),
-            line,
-            column,
-            value: clip(value),
-        };
+        let non_numeric =
+            |column: usize, value: &str| TrcError::NonNumeric { file: file.clone(), line, column, value: clip(value) };
         if c.len() > 2 + 3 * nm {
-            return Err(TrcError::RaggedRow {
-                file: file.clone(),
-                line,
-                found: c.len() - 2,
-                n_markers: nm,
-            });
+            return Err(TrcError::RaggedRow { file: file.clone(), line, found: c.len() - 2, n_markers: nm });
         }
         let frame_cell = c.first().copied().unwrap_or("");
         let frame = parse_frame(frame_cell).ok_or_else(|| non_numeric(1, frame_cell))?;
         let time_cell = c.get(1).copied().unwrap_or("");
-        let time = time_cell
-            .parse::<f64>()
-            .ok()
-            .filter(|t| t.is_finite())
-            .ok_or_else(|| non_numeric(2, time_cell))?;
+        let time = time_cell.parse::<f64>().ok().filter(|t| t.is_finite()).ok_or_else(|| non_numeric(2, time_cell))?;
         if !time_warned && trial.times.last().is_some_and(|&prev| time <= prev) {
             warnings.push(format!("time does not increase at line {line}"));
             time_warned = true;
@@ -346,11 +230,7 @@ pub fn parse_trc(text: &str, name_for_errors: &str) -> Result<MarkerTrial, TrcEr
                 if s.is_empty() || s.eq_ignore_ascii_case("nan") {
                     continue;
                 }
-                let x = s
-                    .parse::<f64>()
-                    .ok()
-                    .filter(|x| x.is_finite())
-                    .ok_or_else(|| non_numeric(col + 1, s))?;
+                let x = s.parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(|| non_numeric(col + 1, s))?;
                 *v = x / per_m;
             }
             if p.iter().any(|v| v.is_nan()) {
@@ -362,17 +242,11 @@ pub fn parse_trc(text: &str, name_for_errors: &str) -> Result<MarkerTrial, TrcEr
         trial.times.push(time);
     }
     if trial.times.is_empty() {
-        return Err(TrcError::NoData {
-            file,
-            line: lines.len() + 1,
-        });
+        return Err(TrcError::NoData { file, line: lines.len() + 1 });
     }
     if let Some(n) = field("NumFrames").and_then(|v| v.parse::<f64>().ok()) {
         if n != trial.n_frames() as f64 {
-            warnings.push(format!(
-                "NumFrames says {n} but {} data rows were read",
-                trial.n_frames()
-            ));
+            warnings.push(format!("NumFrames says {n} but {} data rows were read", trial.n_frames()));
         }
     }
     trial.warnings = warnings;
@@ -382,15 +256,9 @@ pub fn parse_trc(text: &str, name_for_errors: &str) -> Result<MarkerTrial, TrcEr
 /// Writes `trial` as a TRC file with positions in `units` (mm, cm, m, in).
 pub fn write_trc(path: &Path, trial: &MarkerTrial, units: &str) -> Result<(), TrcError> {
     let file = path.display().to_string();
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let text = to_trc_string(trial, units, &name).map_err(|e| match e {
-        TrcError::Unwritable { what, .. } => TrcError::Unwritable {
-            file: file.clone(),
-            what,
-        },
+        TrcError::Unwritable { what, .. } => TrcError::Unwritable { file: file.clone(), what },
         other => other,
     })?;
     std::fs::write(path, text).map_err(|source| TrcError::Io { file, source })
@@ -401,20 +269,13 @@ pub fn write_trc(path: &Path, trial: &MarkerTrial, units: &str) -> Result<(), Tr
 /// decimals; gaps (any non-finite axis) are written as empty cells.
 pub fn to_trc_string(trial: &MarkerTrial, units: &str, name: &str) -> Result<String, TrcError> {
     use std::fmt::Write as _;
-    let bad = |what: String| TrcError::Unwritable {
-        file: name.to_string(),
-        what,
-    };
+    let bad = |what: String| TrcError::Unwritable { file: name.to_string(), what };
     let scale = units_to_metres(units).ok_or_else(|| bad(format!("unknown units {units:?}")))?;
     trial.check_consistent().map_err(bad)?;
-    if let Some(l) = trial
-        .labels
-        .iter()
-        .find(|l| l.is_empty() || l.trim() != l.as_str() || l.contains(['\t', '\n', '\r']))
+    if let Some(l) =
+        trial.labels.iter().find(|l| l.is_empty() || l.trim() != l.as_str() || l.contains(['\t', '\n', '\r']))
     {
-        return Err(bad(format!(
-            "marker label {l:?} is empty or has tabs, line breaks or edge spaces"
-        )));
+        return Err(bad(format!("marker label {l:?} is empty or has tabs, line breaks or edge spaces")));
     }
     if trial.times.is_empty() {
         return Err(bad("trial has no frames".into()));
@@ -431,11 +292,11 @@ pub fn to_trc_string(trial: &MarkerTrial, units: &str, name: &str) -> Result<Str
     let mut s = String::new();
     // Writing into a String cannot fail; the results are ignored.
     let _ = writeln!(s, "PathFileType\t4\t(X/Y/Z)\t{name}");
-    let _ = writeln!(s, "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames");
     let _ = writeln!(
         s,
-        "{rate}\t{rate}\t{nf}\t{nm}\t{units}\t{rate}\t{first_frame}\t{nf}"
+        "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames"
     );
+    let _ = writeln!(s, "{rate}\t{rate}\t{nf}\t{nm}\t{units}\t{rate}\t{first_frame}\t{nf}");
     s.push_str("Frame#\tTime");
     for l in &trial.labels {
         let _ = write!(s, "\t{l}\t\t");

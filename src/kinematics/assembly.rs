@@ -102,20 +102,11 @@ pub struct Evaluator<'m> {
 
 impl<'m> Evaluator<'m> {
     pub fn new(model: &'m Model, proxy: &'m ProxyMap) -> Evaluator<'m> {
-        Evaluator {
-            model,
-            proxy,
-            layout: Layout::new(model, proxy),
-        }
+        Evaluator { model, proxy, layout: Layout::new(model, proxy) }
     }
 
     /// Objective at `p` (forward kinematics only). Returns `(E, Σ‖r‖², markers used)`.
-    pub fn energy(
-        &self,
-        p: &[f64],
-        frame: &FrameProblem<'_>,
-        ws: &mut EvalWorkspace,
-    ) -> (f64, f64, usize) {
+    pub fn energy(&self, p: &[f64], frame: &FrameProblem<'_>, ws: &mut EvalWorkspace) -> (f64, f64, usize) {
         self.proxy.apply(p, &mut ws.y, &mut ws.dphi);
         cpu::forward(self.model, &ws.y, &mut ws.kin);
         let (mut e, mut sq, mut used) = (0.0, 0.0, 0);
@@ -124,9 +115,7 @@ impl<'m> Evaluator<'m> {
             if w <= 0.0 || obs[0].is_nan() || obs[1].is_nan() || obs[2].is_nan() {
                 continue;
             }
-            let d2: f64 = (0..3)
-                .map(|a| (ws.kin.markers[3 * m + a] - obs[a]).powi(2))
-                .sum();
+            let d2: f64 = (0..3).map(|a| (ws.kin.markers[3 * m + a] - obs[a]).powi(2)).sum();
             e += 0.5 * w * d2;
             sq += d2;
             used += 1;
@@ -142,16 +131,7 @@ impl<'m> Evaluator<'m> {
     /// Gauss–Newton model `(H, g, E)` at `p` into `ws.gn`.
     pub fn linearize(&self, p: &[f64], frame: &FrameProblem<'_>, ws: &mut EvalWorkspace) {
         let (energy, sq, used) = self.energy(p, frame, ws);
-        let EvalWorkspace {
-            kin,
-            y,
-            dphi,
-            gn,
-            jy_rows,
-            row,
-            block,
-            gpart,
-        } = ws;
+        let EvalWorkspace { kin, y, dphi, gn, jy_rows, row, block, gpart } = ws;
         gn.h.fill(0.0);
         gn.g.fill(0.0);
         gn.energy = energy;
@@ -192,18 +172,11 @@ impl<'m> Evaluator<'m> {
                     rows[3 * slot + 2] += jr[3 * yi + 2] * d;
                 }
                 // H_S += w Σ_a c_a c_aᵀ (upper triangle), g_S += w Σ_a c_a r_a; rows interleaved by axis.
-                let r = [
-                    kin.markers[3 * m] - obs[0],
-                    kin.markers[3 * m + 1] - obs[1],
-                    kin.markers[3 * m + 2] - obs[2],
-                ];
+                let r = [kin.markers[3 * m] - obs[0], kin.markers[3 * m + 1] - obs[1], kin.markers[3 * m + 2] - obs[2]];
                 for i in 0..ns {
                     let ci = [w * rows[3 * i], w * rows[3 * i + 1], w * rows[3 * i + 2]];
                     gp[i] += ci[0] * r[0] + ci[1] * r[1] + ci[2] * r[2];
-                    for (h, cj) in blk[i * ns + i..(i + 1) * ns]
-                        .iter_mut()
-                        .zip(rows[3 * i..3 * ns].chunks_exact(3))
-                    {
+                    for (h, cj) in blk[i * ns + i..(i + 1) * ns].iter_mut().zip(rows[3 * i..3 * ns].chunks_exact(3)) {
                         *h += ci[0] * cj[0] + ci[1] * cj[1] + ci[2] * cj[2];
                     }
                 }
@@ -215,10 +188,7 @@ impl<'m> Evaluator<'m> {
                 for (i, &ki) in deps.proxies.iter().enumerate() {
                     gn.g[ki] += gp[i];
                     hs[ki * np + ki] += blk[i * ns + i];
-                    for (&kj, &v) in deps.proxies[i + 1..]
-                        .iter()
-                        .zip(&blk[i * ns + i + 1..(i + 1) * ns])
-                    {
+                    for (&kj, &v) in deps.proxies[i + 1..].iter().zip(&blk[i * ns + i + 1..(i + 1) * ns]) {
                         hs[kj * np + ki] += v;
                         hs[ki * np + kj] += v;
                     }

@@ -16,11 +16,7 @@ pub struct FrameModel {
 }
 
 /// `(H, g, E, x̂)` for every frame `f` at proxies `proxies[f]`, in parallel.
-pub fn linearize_batch(
-    eval: &Evaluator<'_>,
-    frames: &[FrameProblem<'_>],
-    proxies: &[Vec<f64>],
-) -> Vec<FrameModel> {
+pub fn linearize_batch(eval: &Evaluator<'_>, frames: &[FrameProblem<'_>], proxies: &[Vec<f64>]) -> Vec<FrameModel> {
     frames
         .par_iter()
         .zip(proxies.par_iter())
@@ -40,17 +36,10 @@ pub fn linearize_batch(
 }
 
 /// Objective `E` for every frame at its proxies (forward kinematics only), in parallel.
-pub fn energy_batch(
-    eval: &Evaluator<'_>,
-    frames: &[FrameProblem<'_>],
-    proxies: &[Vec<f64>],
-) -> Vec<f64> {
+pub fn energy_batch(eval: &Evaluator<'_>, frames: &[FrameProblem<'_>], proxies: &[Vec<f64>]) -> Vec<f64> {
     frames
         .par_iter()
         .zip(proxies.par_iter())
-        .map_init(
-            || EvalWorkspace::new(eval.model, eval.proxy),
-            |ws, (frame, p)| eval.energy(p, frame, ws).0,
-        )
+        .map_init(|| EvalWorkspace::new(eval.model, eval.proxy), |ws, (frame, p)| eval.energy(p, frame, ws).0)
         .collect()
 }

@@ -53,11 +53,7 @@ impl Workspace {
 
     /// World position of marker `m` (m).
     pub fn marker(&self, m: usize) -> Vector3<f64> {
-        Vector3::new(
-            self.markers[3 * m],
-            self.markers[3 * m + 1],
-            self.markers[3 * m + 2],
-        )
+        Vector3::new(self.markers[3 * m], self.markers[3 * m + 1], self.markers[3 * m + 2])
     }
 }
 
@@ -119,12 +115,7 @@ pub fn forward(model: &Model, y: &[f64], ws: &mut Workspace) {
 /// Calls `f(j, ∂x/∂y_j)` for every contribution to the Jacobian of marker `m` (at the state
 /// of the last [`forward`] call); a `y_j` may receive several contributions, to be summed.
 #[inline]
-pub fn marker_contributions(
-    model: &Model,
-    ws: &Workspace,
-    m: usize,
-    mut f: impl FnMut(usize, Vector3<f64>),
-) {
+pub fn marker_contributions(model: &Model, ws: &Workspace, m: usize, mut f: impl FnMut(usize, Vector3<f64>)) {
     let mk = &model.markers[m];
     let x = ws.marker(m);
     for &a in model.chain(mk.body) {
@@ -146,9 +137,7 @@ pub fn marker_contributions(
                 };
                 f(c, d);
             }
-            if let (MotionKind::Translation, Some(wts), Some(p)) =
-                (mo.kind, mo.parent_scale_weights, body.parent)
-            {
+            if let (MotionKind::Translation, Some(wts), Some(p)) = (mo.kind, mo.parent_scale_weights, body.parent) {
                 for k2 in 0..3 {
                     f(model.scale_index(p, k2), w * (ws.motion_val[k] * wts[k2]));
                 }

@@ -32,9 +32,7 @@ impl Layout {
     pub fn new(model: &Model, proxy: &ProxyMap) -> Layout {
         let mut bodies = Vec::new();
         for b in 0..model.nb() {
-            let markers: Vec<usize> = (0..model.markers.len())
-                .filter(|&m| model.markers[m].body == b)
-                .collect();
+            let markers: Vec<usize> = (0..model.markers.len()).filter(|&m| model.markers[m].body == b).collect();
             if markers.is_empty() {
                 continue;
             }
@@ -44,11 +42,7 @@ impl Layout {
                 if let Some(p) = body.parent {
                     ys.extend((0..3).map(|k| model.scale_index(p, k)));
                 }
-                ys.extend(
-                    model.motions[body.joint.motions.clone()]
-                        .iter()
-                        .filter_map(|mo| mo.coordinate),
-                );
+                ys.extend(model.motions[body.joint.motions.clone()].iter().filter_map(|mo| mo.coordinate));
                 ys.extend((0..3).map(|k| model.scale_index(a, k)));
             }
             ys.sort_unstable();
@@ -63,28 +57,12 @@ impl Layout {
             }
             let terms = term_ids
                 .iter()
-                .map(|&t| {
-                    (
-                        t,
-                        y_slot[proxy.terms[t].y_index],
-                        proxies.partition_point(|&k| k < proxy.terms[t].proxy),
-                    )
-                })
+                .map(|&t| (t, y_slot[proxy.terms[t].y_index], proxies.partition_point(|&k| k < proxy.terms[t].proxy)))
                 .collect();
-            bodies.push(BodyDeps {
-                markers,
-                ys,
-                proxies,
-                terms,
-                y_slot,
-            });
+            bodies.push(BodyDeps { markers, ys, proxies, terms, y_slot });
         }
         let max_proxies = bodies.iter().map(|b| b.proxies.len()).max().unwrap_or(0);
         let max_ys = bodies.iter().map(|b| b.ys.len()).max().unwrap_or(0);
-        Layout {
-            bodies,
-            max_proxies,
-            max_ys,
-        }
+        Layout { bodies, max_proxies, max_ys }
     }
 }

@@ -25,10 +25,7 @@ pub enum Function {
 
 impl Function {
     /// The identity `f(x) = x`.
-    pub const IDENTITY: Function = Function::Linear {
-        slope: 1.0,
-        intercept: 0.0,
-    };
+    pub const IDENTITY: Function = Function::Linear { slope: 1.0, intercept: 0.0 };
 
     /// Value and derivative `(f(x), f'(x))`.
     #[inline]
@@ -122,13 +119,7 @@ impl CubicSpline {
                 m[i + 1] = (rhs[i] - h[i + 1] * m[i + 2]) / diag[i];
             }
         }
-        let mut s = CubicSpline {
-            x: x.to_vec(),
-            a: y.to_vec(),
-            b: vec![0.0; n],
-            c: vec![0.0; n],
-            d: vec![0.0; n],
-        };
+        let mut s = CubicSpline { x: x.to_vec(), a: y.to_vec(), b: vec![0.0; n], c: vec![0.0; n], d: vec![0.0; n] };
         for i in 0..n - 1 {
             s.b[i] = (y[i + 1] - y[i]) / h[i] - h[i] * (2.0 * m[i] + m[i + 1]) / 6.0;
             s.c[i] = m[i] / 2.0;
@@ -148,10 +139,7 @@ impl CubicSpline {
             return (self.a[0] + self.b[0] * (x - self.x[0]), self.b[0]);
         }
         if x >= self.x[n - 1] {
-            return (
-                self.a[n - 1] + self.b[n - 1] * (x - self.x[n - 1]),
-                self.b[n - 1],
-            );
+            return (self.a[n - 1] + self.b[n - 1] * (x - self.x[n - 1]), self.b[n - 1]);
         }
         let i = segment_index(&self.x, x);
         let t = x - self.x[i];

@@ -120,27 +120,11 @@ pub enum ModelError {
     #[error("motion {motion} of joint '{joint}' has a zero-length axis")]
     ZeroAxis { joint: String, motion: usize },
     #[error("{what} '{name}' refers to {target} index {index}, but there are only {count}")]
-    BadIndex {
-        what: &'static str,
-        name: String,
-        target: &'static str,
-        index: usize,
-        count: usize,
-    },
-    #[error(
-        "joint '{joint}' motion range {start}..{end} is not contiguous with the previous joint"
-    )]
-    MotionRange {
-        joint: String,
-        start: usize,
-        end: usize,
-    },
+    BadIndex { what: &'static str, name: String, target: &'static str, index: usize, count: usize },
+    #[error("joint '{joint}' motion range {start}..{end} is not contiguous with the previous joint")]
+    MotionRange { joint: String, start: usize, end: usize },
     #[error("coordinate '{coordinate}' has an empty range [{lo}, {hi}]")]
-    EmptyRange {
-        coordinate: String,
-        lo: f64,
-        hi: f64,
-    },
+    EmptyRange { coordinate: String, lo: f64, hi: f64 },
 }
 
 /// An immutable articulated model with its precomputed topology.
@@ -174,29 +158,19 @@ impl Model {
         for (i, b) in bodies.iter().enumerate() {
             if let Some(p) = b.parent {
                 if p >= i {
-                    return Err(ModelError::ParentOrder {
-                        body: b.name.clone(),
-                        parent: p,
-                    });
+                    return Err(ModelError::ParentOrder { body: b.name.clone(), parent: p });
                 }
             }
             let r = &b.joint.motions;
             if r.start != next_motion || r.end < r.start || r.end > motions.len() {
-                return Err(ModelError::MotionRange {
-                    joint: b.joint.name.clone(),
-                    start: r.start,
-                    end: r.end,
-                });
+                return Err(ModelError::MotionRange { joint: b.joint.name.clone(), start: r.start, end: r.end });
             }
             next_motion = r.end;
             for k in r.clone() {
                 let m = &mut motions[k];
                 let n = m.axis.norm();
                 if n < 1e-12 || !n.is_finite() {
-                    return Err(ModelError::ZeroAxis {
-                        joint: b.joint.name.clone(),
-                        motion: k - r.start,
-                    });
+                    return Err(ModelError::ZeroAxis { joint: b.joint.name.clone(), motion: k - r.start });
                 }
                 m.axis /= n;
                 if let Some(c) = m.coordinate {
@@ -205,49 +179,22 @@ impl Model {
             }
         }
         if next_motion != motions.len() {
-            return Err(ModelError::MotionRange {
-                joint: "<end>".into(),
-                start: next_motion,
-                end: motions.len(),
-            });
+            return Err(ModelError::MotionRange { joint: "<end>".into(), start: next_motion, end: motions.len() });
         }
         for c in &coordinates {
             if c.range.0 > c.range.1 || c.range.0.is_nan() || c.range.1.is_nan() {
-                return Err(ModelError::EmptyRange {
-                    coordinate: c.name.clone(),
-                    lo: c.range.0,
-                    hi: c.range.1,
-                });
+                return Err(ModelError::EmptyRange { coordinate: c.name.clone(), lo: c.range.0, hi: c.range.1 });
             }
         }
         for m in &markers {
             check_index("marker", &m.name, "body", m.body, bodies.len())?;
         }
         for c in &couplings {
-            check_index(
-                "coupling",
-                "dependent",
-                "coordinate",
-                c.dependent,
-                coordinates.len(),
-            )?;
-            check_index(
-                "coupling",
-                "independent",
-                "coordinate",
-                c.independent,
-                coordinates.len(),
-            )?;
+            check_index("coupling", "dependent", "coordinate", c.dependent, coordinates.len())?;
+            check_index("coupling", "independent", "coordinate", c.independent, coordinates.len())?;
         }
-        let mut model = Model {
-            name: name.into(),
-            bodies,
-            motions,
-            coordinates,
-            markers,
-            couplings,
-            chains: Vec::new(),
-        };
+        let mut model =
+            Model { name: name.into(), bodies, motions, coordinates, markers, couplings, chains: Vec::new() };
         model.rebuild_topology();
         Ok(model)
     }
@@ -321,17 +268,11 @@ impl Model {
     }
 }
 
-fn check_unique<'a>(
-    what: &'static str,
-    names: impl Iterator<Item = &'a str>,
-) -> Result<(), ModelError> {
+fn check_unique<'a>(what: &'static str, names: impl Iterator<Item = &'a str>) -> Result<(), ModelError> {
     let mut seen = std::collections::HashSet::new();
     for n in names {
         if !seen.insert(n) {
-            return Err(ModelError::Duplicate {
-                what,
-                name: n.to_string(),
-            });
+            return Err(ModelError::Duplicate { what, name: n.to_string() });
         }
     }
     Ok(())
@@ -345,13 +286,7 @@ fn check_index(
     count: usize,
 ) -> Result<(), ModelError> {
     if index >= count {
-        return Err(ModelError::BadIndex {
-            what,
-            name: name.to_string(),
-            target,
-            index,
-            count,
-        });
+        return Err(ModelError::BadIndex { what, name: name.to_string(), target, index, count });
     }
     Ok(())
 }

@@ -18,6 +18,11 @@
 //! axes = "uniform"                 # "uniform": one factor; "xyz": one per body axis
 //! range = [0.6, 1.6]
 //!
+//! [[constraint]]                  # linear inequalities on proxies (solved with clarabel)
+//! proxies = { thigh_r = 1.0, thigh_l = -1.0 }
+//! min = -0.02
+//! max = 0.02
+//!
 //! [markers]
 //! default_weight = 1.0
 //! weights = { LASI = 2.0 }
@@ -72,6 +77,17 @@ fn default_scale_range() -> [f64; 2] {
     [0.5, 2.0]
 }
 
+/// A linear inequality on proxies, `min ≤ Σ coef·proxy ≤ max` (e.g. left/right scale symmetry
+/// within a tolerance: `proxies = { femur_r = 1.0, femur_l = -1.0 }, min = -0.03, max = 0.03`).
+/// Solved with the clarabel backend.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Constraint {
+    pub proxies: BTreeMap<String, f64>,
+    pub min: Option<f64>,
+    pub max: Option<f64>,
+}
+
 /// Marker weighting and selection.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -97,6 +113,8 @@ pub struct Profile {
     pub fixed: BTreeMap<String, f64>,
     #[serde(default, rename = "scale_group")]
     pub scale_groups: Vec<ScaleGroup>,
+    #[serde(default, rename = "constraint")]
+    pub constraints: Vec<Constraint>,
     #[serde(default)]
     pub markers: MarkerSettings,
     /// Overrides of solver settings, interpreted by the solve layer.
@@ -108,10 +126,7 @@ pub struct Profile {
 #[derive(Debug, thiserror::Error)]
 pub enum ProfileError {
     #[error("cannot read profile {path}: {source}")]
-    Io {
-        path: PathBuf,
-        source: std::io::Error,
-    },
+    Io { path: PathBuf, source: std::io::Error },
     #[error("profile {path}: {message}")]
     Parse { path: PathBuf, message: String },
 }
@@ -119,19 +134,13 @@ pub enum ProfileError {
 impl Profile {
     /// Reads a profile from a TOML file.
     pub fn read(path: &Path) -> Result<Profile, ProfileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ProfileError::Io {
-            path: path.into(),
-            source,
-        })?;
+        let text = std::fs::read_to_string(path).map_err(|source| ProfileError::Io { path: path.into(), source })?;
         Profile::parse(&text, path)
     }
 
     /// Parses profile TOML; `path` is used in error messages only.
     pub fn parse(text: &str, path: &Path) -> Result<Profile, ProfileError> {
-        toml::from_str(text).map_err(|e| ProfileError::Parse {
-            path: path.into(),
-            message: e.to_string(),
-        })
+        toml::from_str(text).map_err(|e| ProfileError::Parse { path: path.into(), message: e.to_string() })
     }
 
     /// The profile used when none is given: every coordinate its own proxy, every body its own

@@ -46,26 +46,32 @@ pub struct Term {
 #[derive(Debug, thiserror::Error)]
 pub enum ProxyError {
     #[error("profile names {what} '{name}', which the model does not have (it has: {valid})")]
-    Unknown {
-        what: &'static str,
-        name: String,
-        valid: String,
-    },
+    Unknown { what: &'static str, name: String, valid: String },
     #[error("coordinate '{0}' is driven twice (by two couplings, or fixed and coupled)")]
     DrivenTwice(String),
     #[error("coupling '{proxy}' lists {coords} coordinates but {coefs} coefficient rows")]
-    CouplingShape {
-        proxy: String,
-        coords: usize,
-        coefs: usize,
-    },
+    CouplingShape { proxy: String, coords: usize, coefs: usize },
     #[error("body '{0}' is in two scale groups")]
     ScaledTwice(String),
-    #[error("coupled coordinate '{dependent}' depends on '{independent}', which is not driven by a single identity proxy")]
-    CouplingSource {
-        dependent: String,
-        independent: String,
-    },
+    #[error(
+        "coupled coordinate '{dependent}' depends on '{independent}', which is not driven by a single identity proxy"
+    )]
+    CouplingSource { dependent: String, independent: String },
+}
+
+/// A resolved linear inequality `lo ≤ Σ coef·p_k ≤ hi` on proxies.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ProxyConstraint {
+    pub coefficients: Vec<(usize, f64)>,
+    pub lo: f64,
+    pub hi: f64,
+}
+
+impl ProxyConstraint {
+    /// `Σ coef·p_k`.
+    pub fn value(&self, p: &[f64]) -> f64 {
+        self.coefficients.iter().map(|&(k, c)| c * p[k]).sum()
+    }
 }
 
 /// The map `Φ` from proxies to model state, with its sparsity.
@@ -77,6 +83,8 @@ pub struct ProxyMap {
     /// Terms sorted by `y_index`; `y_terms[j]` is the range of `y_j`'s terms.
     pub terms: Vec<Term>,
     pub y_terms: Vec<Range<usize>>,
+    /// General linear constraints on the proxies (profile `[[constraint]]`).
+    pub constraints: Vec<ProxyConstraint>,
 }
 
 impl ProxyMap {
@@ -89,13 +97,11 @@ impl ProxyMap {
         let mut driven = vec![false; model.ny()];
 
         let coord = |name: &str| {
-            model
-                .coordinate_index(name)
-                .ok_or_else(|| ProxyError::Unknown {
-                    what: "coordinate",
-                    name: name.into(),
-                    valid: list(model.coordinates.iter().map(|c| c.name.as_str())),
-                })
+            model.coordinate_index(name).ok_or_else(|| ProxyError::Unknown {
+                what: "coordinate",
+                name: name.into(),
+                valid: list(model.coordinates.iter().map(|c| c.name.as_str())),
+            })
         };
         for (name, value) in &profile.fixed {
             let j = coord(name)?;
@@ -121,12 +127,7 @@ impl ProxyMap {
             } else {
                 ProxyKind::Rotation
             };
-            proxies.push(Proxy {
-                name: c.proxy.clone(),
-                kind,
-                range: (c.range[0], c.range[1]),
-                default: 0.0,
-            });
+            proxies.push(Proxy { name: c.proxy.clone(), kind, range: (c.range[0], c.range[1]), default: 0.0 });
             for (name, coefs) in c.coordinates.iter().zip(&c.coefficients) {
                 let j = coord(name)?;
                 if driven[j] {
@@ -134,13 +135,7 @@ impl ProxyMap {
                 }
                 driven[j] = true;
                 offsets[j] = 0.0;
-                terms.push(Term {
-                    y_index: j,
-                    proxy: k,
-                    func: Function::Polynomial {
-                        coefficients: coefs.clone(),
-                    },
-                });
+                terms.push(Term { y_index: j, proxy: k, func: Function::Polynomial { coefficients: coefs.clone() } });
             }
         }
         for c in &model.couplings {
@@ -156,24 +151,11 @@ impl ProxyMap {
                 CoordinateKind::Rotational => ProxyKind::Rotation,
                 CoordinateKind::Translational => ProxyKind::Translation,
             };
-            let range = if c.clamped {
-                c.range
-            } else {
-                (f64::NEG_INFINITY, f64::INFINITY)
-            };
+            let range = if c.clamped { c.range } else { (f64::NEG_INFINITY, f64::INFINITY) };
             identity_of[j] = Some(proxies.len());
             offsets[j] = 0.0;
-            terms.push(Term {
-                y_index: j,
-                proxy: proxies.len(),
-                func: Function::IDENTITY,
-            });
-            proxies.push(Proxy {
-                name: c.name.clone(),
-                kind,
-                range,
-                default: c.default,
-            });
+            terms.push(Term { y_index: j, proxy: proxies.len(), func: Function::IDENTITY });
+            proxies.push(Proxy { name: c.name.clone(), kind, range, default: c.default });
         }
         for c in &model.couplings {
             let k = identity_of[c.independent].ok_or_else(|| ProxyError::CouplingSource {
@@ -181,11 +163,7 @@ impl ProxyMap {
                 independent: model.coordinates[c.independent].name.clone(),
             })?;
             offsets[c.dependent] = 0.0;
-            terms.push(Term {
-                y_index: c.dependent,
-                proxy: k,
-                func: c.func.clone(),
-            });
+            terms.push(Term { y_index: c.dependent, proxy: k, func: c.func.clone() });
         }
         // Scale groups.
         let mut scaled = vec![false; model.nb()];
@@ -223,11 +201,7 @@ impl ProxyMap {
                     for &a in *dims {
                         let j = model.scale_index(b, a);
                         offsets[j] = 0.0;
-                        terms.push(Term {
-                            y_index: j,
-                            proxy: k,
-                            func: Function::IDENTITY,
-                        });
+                        terms.push(Term { y_index: j, proxy: k, func: Function::IDENTITY });
                     }
                 }
             }
@@ -242,12 +216,21 @@ impl ProxyMap {
             }
             *r = start..t;
         }
-        Ok(ProxyMap {
-            proxies,
-            offsets,
-            terms,
-            y_terms,
-        })
+        let mut constraints = Vec::new();
+        for c in &profile.constraints {
+            let mut coefficients = Vec::new();
+            for (name, &coef) in &c.proxies {
+                let k = proxies.iter().position(|p| &p.name == name).ok_or_else(|| ProxyError::Unknown {
+                    what: "proxy",
+                    name: name.clone(),
+                    valid: list(proxies.iter().map(|p| p.name.as_str())),
+                })?;
+                coefficients.push((k, coef));
+            }
+            let (lo, hi) = (c.min.unwrap_or(f64::NEG_INFINITY), c.max.unwrap_or(f64::INFINITY));
+            constraints.push(ProxyConstraint { coefficients, lo, hi });
+        }
+        Ok(ProxyMap { proxies, offsets, terms, y_terms, constraints })
     }
 
     /// Number of proxies `np`.
@@ -300,8 +283,8 @@ impl ProxyMap {
 
 fn list<'a>(names: impl Iterator<Item = &'a str>) -> String {
     let v: Vec<&str> = names.collect();
-    if v.len() > 40 {
-        format!("{} … ({} in all)", v[..40].join(", "), v.len())
+    if v.len() > 100 {
+        format!("{} … ({} in all)", v[..100].join(", "), v.len())
     } else {
         v.join(", ")
     }

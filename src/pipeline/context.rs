@@ -24,11 +24,7 @@ pub enum ContextError {
     #[error("profile {path}: {message}")]
     Settings { path: String, message: String },
     #[error("profile {path}: marker '{name}' is not in the model (it has: {valid})")]
-    UnknownMarker {
-        path: String,
-        name: String,
-        valid: String,
-    },
+    UnknownMarker { path: String, name: String, valid: String },
 }
 
 /// Model, proxy map, marker weights and settings of one subject.
@@ -55,26 +51,11 @@ impl Context {
         model_source: String,
     ) -> Result<Context, ContextError> {
         let proxy = ProxyMap::new(&model, &profile)?;
-        let settings = SolverSettings::from_table(&profile.solver).map_err(|message| {
-            ContextError::Settings {
-                path: profile_name.into(),
-                message,
-            }
-        })?;
-        let valid = || {
-            model
-                .markers
-                .iter()
-                .map(|m| m.name.as_str())
-                .collect::<Vec<_>>()
-                .join(", ")
-        };
-        for name in profile
-            .markers
-            .weights
-            .keys()
-            .chain(&profile.markers.exclude)
-        {
+        let mut settings = SolverSettings::from_table(&profile.solver)
+            .map_err(|message| ContextError::Settings { path: profile_name.into(), message })?;
+        settings.qp = crate::solve::backend_for(settings.qp, &proxy);
+        let valid = || model.markers.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join(", ");
+        for name in profile.markers.weights.keys().chain(&profile.markers.exclude) {
             if model.marker_index(name).is_none() {
                 return Err(ContextError::UnknownMarker {
                     path: profile_name.into(),
@@ -90,52 +71,27 @@ impl Context {
                 if profile.markers.exclude.contains(&m.name) {
                     0.0
                 } else {
-                    profile
-                        .markers
-                        .weights
-                        .get(&m.name)
-                        .copied()
-                        .or(profile.markers.default_weight)
-                        .unwrap_or(m.weight)
+                    profile.markers.weights.get(&m.name).copied().or(profile.markers.default_weight).unwrap_or(m.weight)
                 }
             })
             .collect();
-        Ok(Context {
-            model,
-            profile,
-            proxy,
-            settings,
-            marker_weights,
-            model_source,
-            warnings: Vec::new(),
-        })
+        Ok(Context { model, profile, proxy, settings, marker_weights, model_source, warnings: Vec::new() })
     }
 
     /// The shipped full-body model with its profile.
     pub fn shipped() -> Result<Context, ContextError> {
         let model = mjcf::parse_mjcf(SHIPPED_MODEL, "models/fullbody.xml")?;
         let profile = Profile::parse(SHIPPED_PROFILE, Path::new("models/fullbody.toml"))?;
-        Context::new(
-            model,
-            profile,
-            "models/fullbody.toml",
-            "shipped:models/fullbody.xml".into(),
-        )
+        Context::new(model, profile, "models/fullbody.toml", "shipped:models/fullbody.xml".into())
     }
 
     /// A model file (MJCF) with an optional profile file (default: every coordinate free,
     /// every body its own uniform scale).
-    pub fn from_files(
-        model_path: &Path,
-        profile_path: Option<&Path>,
-    ) -> Result<Context, ContextError> {
+    pub fn from_files(model_path: &Path, profile_path: Option<&Path>) -> Result<Context, ContextError> {
         let (model, warnings) = mjcf::read_mjcf(model_path)?;
         let (profile, name) = match profile_path {
             Some(p) => (Profile::read(p)?, p.display().to_string()),
-            None => (
-                Profile::default_for(&model),
-                "<default profile>".to_string(),
-            ),
+            None => (Profile::default_for(&model), "<default profile>".to_string()),
         };
         let mut ctx = Context::new(model, profile, &name, model_path.display().to_string())?;
         ctx.warnings = warnings;

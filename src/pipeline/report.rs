@@ -94,11 +94,8 @@ impl Report {
     pub fn push(&mut self, t: TrialReport) {
         self.totals.frames += t.frames;
         self.totals.solve_wall_s += t.solve_wall_s;
-        self.totals.frames_per_s = if self.totals.solve_wall_s > 0.0 {
-            self.totals.frames as f64 / self.totals.solve_wall_s
-        } else {
-            0.0
-        };
+        self.totals.frames_per_s =
+            if self.totals.solve_wall_s > 0.0 { self.totals.frames as f64 / self.totals.solve_wall_s } else { 0.0 };
         self.trials.push(t);
     }
 
@@ -128,15 +125,7 @@ impl Report {
     pub fn table(&self) -> String {
         let mut s = format!(
             "{:<28} {:>7} {:>9} {:>8} {:>8} {:>6} {:>6} {:>8} {:>8}\n",
-            "trial",
-            "frames",
-            "FPS",
-            "ms p50",
-            "ms p90",
-            "it p50",
-            "it p90",
-            "RMSE p50",
-            "RMSE p90"
+            "trial", "frames", "FPS", "ms p50", "ms p90", "it p50", "it p90", "RMSE p50", "RMSE p90"
         );
         for t in &self.trials {
             match (&t.ms_per_frame, &t.iterations, &t.marker_rmse_mm) {
@@ -154,13 +143,7 @@ impl Report {
                         r.p90
                     )
                 }
-                _ => {
-                    s += &format!(
-                        "{:<28} failed: {}\n",
-                        t.trial,
-                        t.error.clone().unwrap_or_default()
-                    )
-                }
+                _ => s += &format!("{:<28} failed: {}\n", t.trial, t.error.clone().unwrap_or_default()),
             }
         }
         s
@@ -170,18 +153,11 @@ impl Report {
 /// Summarises a solved trial, with errors against `truth` when given.
 pub fn trial_report(ctx: &Context, r: &TrialResult, truth: Option<&Truth>) -> TrialReport {
     let n = r.proxies.len();
-    let solved: Vec<usize> = (0..n)
-        .filter(|&f| r.stats[f].status != FrameStatus::TooFewMarkers)
-        .collect();
+    let solved: Vec<usize> = (0..n).filter(|&f| r.stats[f].status != FrameStatus::TooFewMarkers).collect();
     let rmse_mm: Vec<f64> = solved.iter().map(|&f| r.stats[f].rmse_m * 1e3).collect();
     let ms: Vec<f64> = solved.iter().map(|&f| r.frame_seconds[f] * 1e3).collect();
-    let its: Vec<f64> = solved
-        .iter()
-        .map(|&f| r.stats[f].iterations as f64)
-        .collect();
-    let scale_k: Vec<usize> = (0..ctx.proxy.np())
-        .filter(|&k| ctx.proxy.proxies[k].kind == ProxyKind::Scale)
-        .collect();
+    let its: Vec<f64> = solved.iter().map(|&f| r.stats[f].iterations as f64).collect();
+    let scale_k: Vec<usize> = (0..ctx.proxy.np()).filter(|&k| ctx.proxy.proxies[k].kind == ProxyKind::Scale).collect();
     let mean_p: Vec<f64> = (0..ctx.proxy.np())
         .map(|k| solved.iter().map(|&f| r.proxies[f][k]).sum::<f64>() / solved.len().max(1) as f64)
         .collect();
@@ -191,20 +167,11 @@ pub fn trial_report(ctx: &Context, r: &TrialResult, truth: Option<&Truth>) -> Tr
         .bodies
         .iter()
         .enumerate()
-        .map(|(b, body)| {
-            (
-                body.name.clone(),
-                [0, 1, 2].map(|a| y_mean[ctx.model.scale_index(b, a)]),
-            )
-        })
+        .map(|(b, body)| (body.name.clone(), [0, 1, 2].map(|a| y_mean[ctx.model.scale_index(b, a)])))
         .collect();
     let drift = scale_k
         .iter()
-        .flat_map(|&k| {
-            solved
-                .iter()
-                .map(move |&f| (r.proxies[f][k] - r.calibration.proxies[k]).abs())
-        })
+        .flat_map(|&k| solved.iter().map(move |&f| (r.proxies[f][k] - r.calibration.proxies[k]).abs()))
         .fold(0.0f64, f64::max);
     let (pose_error_deg, scale_error_pct) = match truth {
         Some(t) => errors_against(ctx, r, &mean_p, &scale_k, t),
@@ -222,11 +189,7 @@ pub fn trial_report(ctx: &Context, r: &TrialResult, truth: Option<&Truth>) -> Tr
         scale,
         scale_drift_max: (!scale_k.is_empty()).then_some(drift),
         bridged_frames: r.bridged.clone(),
-        frames_at_iteration_cap: r
-            .stats
-            .iter()
-            .filter(|s| s.status == FrameStatus::MaxIterations)
-            .count(),
+        frames_at_iteration_cap: r.stats.iter().filter(|s| s.status == FrameStatus::MaxIterations).count(),
         unmatched_model_markers: r.unmatched_model.clone(),
         unmatched_trial_markers: r.unmatched_trial.clone(),
         pose_error_deg,
@@ -249,23 +212,14 @@ fn errors_against(
         .iter()
         .enumerate()
         .filter(|(j, c)| c.kind == CoordinateKind::Rotational && !ctx.proxy.y_terms[*j].is_empty())
-        .filter_map(|(j, c)| {
-            t.coordinate_names
-                .iter()
-                .position(|n| n == &c.name)
-                .map(|tj| (j, tj))
-        })
+        .filter_map(|(j, c)| t.coordinate_names.iter().position(|n| n == &c.name).map(|tj| (j, tj)))
         .collect();
     let mut errs = Vec::new();
     for (f, p) in r.proxies.iter().enumerate().take(t.coordinates.len()) {
         let y = ctx.proxy.state(p);
         for &(j, tj) in &moved {
             // A rotation off by whole turns is the same pose.
-            errs.push(
-                crate::solve::init::wrap_angle(y[j] - t.coordinates[f][tj])
-                    .to_degrees()
-                    .abs(),
-            );
+            errs.push(crate::solve::init::wrap_angle(y[j] - t.coordinates[f][tj]).to_degrees().abs());
         }
     }
     let pose = (!errs.is_empty()).then(|| PoseError {
@@ -274,11 +228,7 @@ fn errors_against(
     });
     let serr: Vec<f64> = scale_k
         .iter()
-        .filter_map(|&k| {
-            t.scales
-                .get(&ctx.proxy.proxies[k].name)
-                .map(|&truth| (mean_p[k] / truth - 1.0).abs() * 100.0)
-        })
+        .filter_map(|&k| t.scales.get(&ctx.proxy.proxies[k].name).map(|&truth| (mean_p[k] / truth - 1.0).abs() * 100.0))
         .collect();
     let scale = (!serr.is_empty()).then(|| ScaleError {
         mean: serr.iter().sum::<f64>() / serr.len() as f64,

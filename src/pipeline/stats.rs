@@ -37,10 +37,7 @@ pub struct P50P90 {
 
 impl P50P90 {
     pub fn of(values: &[f64]) -> P50P90 {
-        P50P90 {
-            p50: percentile(values, 0.5),
-            p90: percentile(values, 0.9),
-        }
+        P50P90 { p50: percentile(values, 0.5), p90: percentile(values, 0.9) }
     }
 }
 
@@ -54,10 +51,6 @@ pub struct MeanP50P90 {
 
 impl MeanP50P90 {
     pub fn of(values: &[f64]) -> MeanP50P90 {
-        MeanP50P90 {
-            mean: mean(values),
-            p50: percentile(values, 0.5),
-            p90: percentile(values, 0.9),
-        }
+        MeanP50P90 { mean: mean(values), p50: percentile(values, 0.5), p90: percentile(values, 0.9) }
     }
 }

@@ -9,9 +9,7 @@ use crate::kinematics::assembly::FrameProblem;
 use crate::model::proxy::ProxyKind;
 use crate::solve::calibrate::track;
 use crate::solve::init::cold_start;
-use crate::solve::{
-    calibrate, make_qp, Calibration, FrameSolver, FrameStats, FrameStatus, WarmStart,
-};
+use crate::solve::{calibrate, make_qp, Calibration, FrameSolver, FrameStats, FrameStatus, WarmStart};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -19,16 +17,10 @@ use std::time::Instant;
 #[derive(Debug, thiserror::Error)]
 pub enum TrialError {
     #[error("trial '{trial}': none of its markers matches the model's (trial has: {trial_labels}; model has: {model_labels})")]
-    NoMarkerMatch {
-        trial: String,
-        trial_labels: String,
-        model_labels: String,
-    },
+    NoMarkerMatch { trial: String, trial_labels: String, model_labels: String },
     #[error("trial '{trial}' has no frames")]
     Empty { trial: String },
-    #[error(
-        "trial '{trial}': no frame has at least {min} observed markers, nothing to calibrate on"
-    )]
+    #[error("trial '{trial}': no frame has at least {min} observed markers, nothing to calibrate on")]
     NothingToCalibrate { trial: String, min: usize },
 }
 
@@ -54,30 +46,12 @@ pub struct TrialResult {
 }
 
 /// For each model marker, the trial column that observes it.
-pub fn match_markers(
-    ctx: &Context,
-    trial: &MarkerTrial,
-) -> (Vec<Option<usize>>, Vec<String>, Vec<String>) {
-    let map: Vec<Option<usize>> = ctx
-        .model
-        .markers
-        .iter()
-        .map(|m| trial.labels.iter().position(|l| l == &m.name))
-        .collect();
-    let unmatched_model = ctx
-        .model
-        .markers
-        .iter()
-        .zip(&map)
-        .filter(|(_, c)| c.is_none())
-        .map(|(m, _)| m.name.clone())
-        .collect();
-    let unmatched_trial = trial
-        .labels
-        .iter()
-        .filter(|l| ctx.model.marker_index(l).is_none())
-        .cloned()
-        .collect();
+pub fn match_markers(ctx: &Context, trial: &MarkerTrial) -> (Vec<Option<usize>>, Vec<String>, Vec<String>) {
+    let map: Vec<Option<usize>> =
+        ctx.model.markers.iter().map(|m| trial.labels.iter().position(|l| l == &m.name)).collect();
+    let unmatched_model =
+        ctx.model.markers.iter().zip(&map).filter(|(_, c)| c.is_none()).map(|(m, _)| m.name.clone()).collect();
+    let unmatched_trial = trial.labels.iter().filter(|l| ctx.model.marker_index(l).is_none()).cloned().collect();
     (map, unmatched_model, unmatched_trial)
 }
 
@@ -96,33 +70,24 @@ pub fn observations(trial: &MarkerTrial, map: &[Option<usize>]) -> Vec<f64> {
 }
 
 fn observed_count(obs: &[f64]) -> usize {
-    obs.chunks_exact(3)
-        .filter(|c| !c[0].is_nan() && !c[1].is_nan() && !c[2].is_nan())
-        .count()
+    obs.chunks_exact(3).filter(|c| !c[0].is_nan() && !c[1].is_nan() && !c[2].is_nan()).count()
 }
 
 /// Up to `k` frames spread evenly over those with the most observed markers.
 fn calibration_frames(obs: &[f64], stride: usize, k: usize, min: usize) -> Vec<usize> {
     let counts: Vec<usize> = obs.chunks(stride).map(observed_count).collect();
     let best = counts.iter().copied().max().unwrap_or(0);
-    let good: Vec<usize> = (0..counts.len())
-        .filter(|&f| counts[f] >= min && counts[f] + 2 >= best)
-        .collect();
+    let good: Vec<usize> = (0..counts.len()).filter(|&f| counts[f] >= min && counts[f] + 2 >= best).collect();
     if good.is_empty() || k == 0 {
         return good;
     }
     let n = good.len().min(k);
-    (0..n)
-        .map(|i| good[(i * good.len()) / n + good.len() / (2 * n)])
-        .collect()
+    (0..n).map(|i| good[(i * good.len()) / n + good.len() / (2 * n)]).collect()
 }
 
 /// Calibrates one subject's morphology from frames pooled over `trials` (a static trial, or
 /// the motion trials themselves).
-pub fn calibrate_subject(
-    ctx: &Context,
-    trials: &[(&str, &MarkerTrial)],
-) -> Result<Calibration, TrialError> {
+pub fn calibrate_subject(ctx: &Context, trials: &[(&str, &MarkerTrial)]) -> Result<Calibration, TrialError> {
     let settings = &ctx.settings;
     let stride = 3 * ctx.model.markers.len();
     let per_trial = settings.calibration_frames.div_ceil(trials.len().max(1));
@@ -149,12 +114,9 @@ pub fn calibrate_subject(
         // Track from the first frame to the last chosen one so that every chosen frame starts
         // from a pose continuous with the motion (a cold start far into a motion can land in a
         // wrong local minimum).
-        let first = (0..=last)
-            .find(|&f| observed_count(&o[f * stride..(f + 1) * stride]) >= settings.min_markers)
-            .unwrap_or(0);
-        let slices: Vec<&[f64]> = (first..=last)
-            .map(|f| &o[f * stride..(f + 1) * stride])
-            .collect();
+        let first =
+            (0..=last).find(|&f| observed_count(&o[f * stride..(f + 1) * stride]) >= settings.min_markers).unwrap_or(0);
+        let slices: Vec<&[f64]> = (first..=last).map(|f| &o[f * stride..(f + 1) * stride]).collect();
         let tracked = track(&mut solver, &slices, &template, &p0);
         for f in chosen {
             pooled.extend_from_slice(&o[f * stride..(f + 1) * stride]);
@@ -162,15 +124,8 @@ pub fn calibrate_subject(
         }
     }
     if pooled.is_empty() {
-        let trial = trials
-            .iter()
-            .map(|(n, _)| *n)
-            .collect::<Vec<_>>()
-            .join(", ");
-        return Err(TrialError::NothingToCalibrate {
-            trial,
-            min: settings.min_markers,
-        });
+        let trial = trials.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ");
+        return Err(TrialError::NothingToCalibrate { trial, min: settings.min_markers });
     }
     let slices: Vec<&[f64]> = pooled.chunks(stride).collect();
     Ok(calibrate(&mut solver, &slices, &template, &p0, &starts))
@@ -180,13 +135,7 @@ fn no_match(ctx: &Context, name: &str, trial: &MarkerTrial) -> TrialError {
     TrialError::NoMarkerMatch {
         trial: name.into(),
         trial_labels: trial.labels.join(", "),
-        model_labels: ctx
-            .model
-            .markers
-            .iter()
-            .map(|m| m.name.clone())
-            .collect::<Vec<_>>()
-            .join(", "),
+        model_labels: ctx.model.markers.iter().map(|m| m.name.clone()).collect::<Vec<_>>().join(", "),
     }
 }
 
@@ -220,11 +169,8 @@ pub fn solve_trial(
     let mut track_w = vec![0.0; ny];
     for t in &ctx.proxy.terms {
         let kind = ctx.proxy.proxies[t.proxy].kind;
-        track_w[t.y_index] = if kind == ProxyKind::Scale {
-            settings.scale_tracking_weight
-        } else {
-            settings.pose_prior_weight
-        };
+        track_w[t.y_index] =
+            if kind == ProxyKind::Scale { settings.scale_tracking_weight } else { settings.pose_prior_weight };
     }
 
     let mut neutral = ctx.proxy.default_proxies();
@@ -237,13 +183,8 @@ pub fn solve_trial(
     let n = trial.n_frames();
     let threads = threads.max(1);
     let segments = threads.min(n.div_ceil(100)).max(1);
-    let bounds: Vec<(usize, usize)> = (0..segments)
-        .map(|i| (i * n / segments, (i + 1) * n / segments))
-        .collect();
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .ok();
+    let bounds: Vec<(usize, usize)> = (0..segments).map(|i| (i * n / segments, (i + 1) * n / segments)).collect();
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().ok();
     let run = || {
         bounds
             .par_iter()
@@ -300,21 +241,15 @@ pub fn solve_trial(
         frame_seconds.push(t);
     }
     // Bridge frames without enough markers from the nearest solved neighbours.
-    let solved: Vec<usize> = (0..n)
-        .filter(|&f| stats[f].status != FrameStatus::TooFewMarkers)
-        .collect();
-    let bridged: Vec<usize> = (0..n)
-        .filter(|&f| stats[f].status == FrameStatus::TooFewMarkers)
-        .collect();
+    let solved: Vec<usize> = (0..n).filter(|&f| stats[f].status != FrameStatus::TooFewMarkers).collect();
+    let bridged: Vec<usize> = (0..n).filter(|&f| stats[f].status == FrameStatus::TooFewMarkers).collect();
     for &f in &bridged {
         let before = solved.iter().rev().find(|&&g| g < f);
         let after = solved.iter().find(|&&g| g > f);
         proxies[f] = match (before, after) {
             (Some(&g0), Some(&g1)) => {
                 let w = (f - g0) as f64 / (g1 - g0) as f64;
-                (0..np)
-                    .map(|k| (1.0 - w) * proxies[g0][k] + w * proxies[g1][k])
-                    .collect()
+                (0..np).map(|k| (1.0 - w) * proxies[g0][k] + w * proxies[g1][k]).collect()
             }
             (Some(&g), None) | (None, Some(&g)) => proxies[g].clone(),
             (None, None) => calibration.proxies.clone(),

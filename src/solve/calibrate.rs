@@ -7,13 +7,17 @@
 //! (C + Σ C_k − Σ B_kᵀ A_k⁻¹ B_k) Δs = −g_s − Σ (g_s,k − B_kᵀ A_k⁻¹ g_q,k)
 //! Δq_k = −A_k⁻¹ (g_q,k + B_k Δs)
 //! ```
-//! (`A_k`, `C` damped Levenberg–Marquardt style), clipped to the proxy ranges and accepted when
-//! the total objective decreases. A weak prior pulls unobservable scales toward 1.
+//! (`A_k`, `C` damped Levenberg–Marquardt style). The scale step solves that reduced quadratic
+//! as a QP under the scale ranges and the profile's constraints on scale proxies (e.g. left/right
+//! symmetry); the poses follow by back-substitution, clipped to their ranges. A step is accepted
+//! when the total objective decreases. A weak prior pulls unobservable scales toward 1.
 
 use super::init::cold_start;
 use super::trqp::FrameSolver;
 use crate::kinematics::assembly::FrameProblem;
 use crate::model::proxy::ProxyKind;
+use super::qp::{BoxQp, ClarabelQp, LinearConstraints, QpProblem, QpSolver};
+use crate::model::proxy::ProxyMap;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
@@ -44,12 +48,8 @@ pub fn calibrate(
     let eval = solver.eval;
     let proxy = eval.proxy;
     let np = proxy.np();
-    let scale: Vec<usize> = (0..np)
-        .filter(|&k| proxy.proxies[k].kind == ProxyKind::Scale)
-        .collect();
-    let pose: Vec<usize> = (0..np)
-        .filter(|&k| proxy.proxies[k].kind != ProxyKind::Scale)
-        .collect();
+    let scale: Vec<usize> = (0..np).filter(|&k| proxy.proxies[k].kind == ProxyKind::Scale).collect();
+    let pose: Vec<usize> = (0..np).filter(|&k| proxy.proxies[k].kind != ProxyKind::Scale).collect();
     let (ns, nq) = (scale.len(), pose.len());
     let s = solver.settings.clone();
     let prior = s.calibration_scale_prior;
@@ -57,20 +57,13 @@ pub fn calibrate(
     // Per-frame poses at the starting scale.
     let mut poses: Vec<Vec<f64>> = Vec::with_capacity(frames.len());
     for (obs, start) in frames.iter().zip(starts) {
-        let fp = FrameProblem {
-            observed: obs,
-            ..*frame_template
-        };
+        let fp = FrameProblem { observed: obs, ..*frame_template };
         let mut p = start.clone();
         for &k in &scale {
             p[k] = p0[k];
         }
-        let saved = std::mem::replace(
-            &mut solver.free,
-            (0..np)
-                .map(|k| proxy.proxies[k].kind != ProxyKind::Scale)
-                .collect(),
-        );
+        let saved =
+            std::mem::replace(&mut solver.free, (0..np).map(|k| proxy.proxies[k].kind != ProxyKind::Scale).collect());
         solver.solve(&fp, &mut p);
         solver.free = saved;
         poses.push(p);
@@ -84,17 +77,10 @@ pub fn calibrate(
             for (i, &k) in scale.iter().enumerate() {
                 p[k] = shared[i];
             }
-            let fp = FrameProblem {
-                observed: obs,
-                ..*frame_template
-            };
+            let fp = FrameProblem { observed: obs, ..*frame_template };
             let (ek, sq, used) = eval.energy(&p, &fp, &mut solver.ws);
             e += ek;
-            rmse += if used > 0 {
-                (sq / used as f64).sqrt()
-            } else {
-                0.0
-            };
+            rmse += if used > 0 { (sq / used as f64).sqrt() } else { 0.0 };
         }
         e += 0.5 * prior * shared.iter().map(|v| (v - 1.0).powi(2)).sum::<f64>();
         (e, rmse / frames.len().max(1) as f64)
@@ -119,10 +105,7 @@ pub fn calibrate(
             for (i, &k) in scale.iter().enumerate() {
                 p[k] = shared[i];
             }
-            let fp = FrameProblem {
-                observed: obs,
-                ..*frame_template
-            };
+            let fp = FrameProblem { observed: obs, ..*frame_template };
             eval.linearize(&p, &fp, &mut solver.ws);
             let gn = &solver.ws.gn;
             let mut a = gn.h.select_rows(&pose).select_columns(&pose);
@@ -143,10 +126,28 @@ pub fn calibrate(
         for d in 0..ns {
             schur[(d, d)] += lambda * schur[(d, d)].max(s.damping_floor);
         }
-        let ds = match schur.clone().cholesky() {
-            Some(ch) => ch.solve(&rhs),
-            None => DVector::zeros(ns),
+        // The poses eliminated, the scale step is a small QP: the scale ranges as bounds, the
+        // profile's constraints on scale proxies as general constraints.
+        let lb = DVector::from_iterator(ns, scale.iter().enumerate().map(|(i, &k)| lo[k] - shared[i]));
+        let ub = DVector::from_iterator(ns, scale.iter().enumerate().map(|(i, &k)| hi[k] - shared[i]));
+        let neg_rhs = -&rhs;
+        let problem = QpProblem { h: &schur, g: &neg_rhs, lb: &lb, ub: &ub };
+        let mut ds = DVector::zeros(ns);
+        let mut current = p0.to_vec();
+        for (i, &k) in scale.iter().enumerate() {
+            current[k] = shared[i];
+        }
+        let solved = match scale_constraints(proxy, &scale, &current) {
+            Some(c) => {
+                let mut qp = ClarabelQp::new(Default::default());
+                qp.set_constraints(Some(c));
+                qp.solve(&problem, &mut ds)
+            }
+            None => BoxQp::new().solve(&problem, &mut ds),
         };
+        if solved.is_err() {
+            break;
+        }
         let mut new_shared = shared.clone();
         for (i, &k) in scale.iter().enumerate() {
             new_shared[i] = (shared[i] + ds[i]).clamp(lo[k], hi[k]);
@@ -180,12 +181,30 @@ pub fn calibrate(
     for (i, &k) in scale.iter().enumerate() {
         proxies[k] = shared[i];
     }
-    Calibration {
-        proxies,
-        frames: frames.len(),
-        iterations,
-        rmse_m: rmse,
+    Calibration { proxies, frames: frames.len(), iterations, rmse_m: rmse }
+}
+
+/// The profile's constraints that involve scale proxies only, as constraints on a step of the
+/// scale vector (indexed like `scale`) from `p`; `None` when there are none.
+fn scale_constraints(proxy: &ProxyMap, scale: &[usize], p: &[f64]) -> Option<LinearConstraints> {
+    let rows: Vec<_> =
+        proxy.constraints.iter().filter(|c| c.coefficients.iter().all(|(k, _)| scale.contains(k))).collect();
+    if rows.is_empty() {
+        return None;
     }
+    let m = rows.len();
+    let mut c = LinearConstraints { a: DMatrix::zeros(m, scale.len()), lo: DVector::zeros(m), hi: DVector::zeros(m) };
+    for (i, pc) in rows.iter().enumerate() {
+        for &(k, coef) in &pc.coefficients {
+            if let Some(col) = scale.iter().position(|&s| s == k) {
+                c.a[(i, col)] += coef;
+            }
+        }
+        let v = pc.value(p);
+        c.lo[i] = pc.lo - v;
+        c.hi[i] = pc.hi - v;
+    }
+    Some(c)
 }
 
 /// Pose-only tracking through `frames` in order at the scale of `p0`, warm-started from frame to
@@ -198,22 +217,12 @@ pub fn track(
     p0: &[f64],
 ) -> Vec<Vec<f64>> {
     let proxy = solver.eval.proxy;
-    let saved = std::mem::replace(
-        &mut solver.free,
-        proxy
-            .proxies
-            .iter()
-            .map(|p| p.kind != ProxyKind::Scale)
-            .collect(),
-    );
+    let saved = std::mem::replace(&mut solver.free, proxy.proxies.iter().map(|p| p.kind != ProxyKind::Scale).collect());
     let mut out = Vec::with_capacity(frames.len());
     let mut p = p0.to_vec();
     let mut warm = false;
     for obs in frames {
-        let fp = FrameProblem {
-            observed: obs,
-            ..*frame_template
-        };
+        let fp = FrameProblem { observed: obs, ..*frame_template };
         if !warm {
             p = p0.to_vec();
             cold_start(solver, &fp, &mut p);

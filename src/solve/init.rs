@@ -90,11 +90,7 @@ pub fn sweep(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mut [f6
         for subtree in [false, true] {
             let mut observed = 0;
             for (m, mk) in model.markers.iter().enumerate() {
-                let counts = if subtree {
-                    model.is_ancestor(b, mk.body)
-                } else {
-                    mk.body == b
-                };
+                let counts = if subtree { model.is_ancestor(b, mk.body) } else { mk.body == b };
                 weights[m] = if counts { frame.marker_weights[m] } else { 0.0 };
                 if weights[m] > 0.0 && !frame.observed[3 * m].is_nan() {
                     observed += 1;
@@ -103,10 +99,7 @@ pub fn sweep(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mut [f6
             if observed < if subtree { 1 } else { 2 } {
                 continue;
             }
-            let local = FrameProblem {
-                marker_weights: &weights,
-                ..*frame
-            };
+            let local = FrameProblem { marker_weights: &weights, ..*frame };
             solver.solve(&local, p);
         }
         solver.settings.min_markers = min_markers;
@@ -120,13 +113,10 @@ pub fn place_root(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mu
     let model = eval.model;
     // Model markers at p, paired with observations.
     eval.energy(p, frame, &mut solver.ws);
-    let roots: Vec<usize> = (0..model.nb())
-        .filter(|&b| model.bodies[b].parent.is_none())
-        .collect();
+    let roots: Vec<usize> = (0..model.nb()).filter(|&b| model.bodies[b].parent.is_none()).collect();
     let observed = |m: usize| {
         let o = &frame.observed[3 * m..3 * m + 3];
-        (frame.marker_weights[m] > 0.0 && o.iter().all(|v| !v.is_nan()))
-            .then(|| Vector3::new(o[0], o[1], o[2]))
+        (frame.marker_weights[m] > 0.0 && o.iter().all(|v| !v.is_nan())).then(|| Vector3::new(o[0], o[1], o[2]))
     };
     let pairs = |root_only: bool| -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
         (0..model.markers.len())
@@ -146,16 +136,8 @@ pub fn place_root(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mu
             [v.x, v.y, v.z]
         })
         .collect();
-    let weights: Vec<f64> = model
-        .markers
-        .iter()
-        .map(|mk| if roots.contains(&mk.body) { 1.0 } else { 0.1 })
-        .collect();
-    let target_frame = FrameProblem {
-        observed: &targets,
-        marker_weights: &weights,
-        ..*frame
-    };
+    let weights: Vec<f64> = model.markers.iter().map(|mk| if roots.contains(&mk.body) { 1.0 } else { 0.1 }).collect();
+    let target_frame = FrameProblem { observed: &targets, marker_weights: &weights, ..*frame };
     let root = root_proxies(solver);
     let saved_free = std::mem::replace(&mut solver.free, vec![false; p.len()]);
     for &k in &root {
@@ -166,10 +148,8 @@ pub fn place_root(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mu
     // The targets are reachable exactly, so a start that fits them is the answer. Headings for
     // the first root rotation proxy: as it is, then spread around the circle, to escape flipped
     // local minima of the Euler decomposition.
-    let first_rot = root
-        .iter()
-        .copied()
-        .find(|&k| eval.proxy.proxies[k].kind == crate::model::proxy::ProxyKind::Rotation);
+    let first_rot =
+        root.iter().copied().find(|&k| eval.proxy.proxies[k].kind == crate::model::proxy::ProxyKind::Rotation);
     let mut best: Option<(f64, Vec<f64>)> = None;
     let starts = if first_rot.is_some() { 9 } else { 1 };
     for i in 0..starts {

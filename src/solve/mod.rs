@@ -18,3 +18,13 @@ pub fn make_qp(kind: QpBackend) -> Box<dyn qp::QpSolver> {
         QpBackend::Clarabel => Box::new(qp::ClarabelQp::new(Default::default())),
     }
 }
+
+/// The backend that can solve this proxy map's steps: clarabel when the profile has general
+/// linear constraints (the box QP handles bounds only), else the one asked for.
+pub fn backend_for(kind: QpBackend, proxy: &crate::model::proxy::ProxyMap) -> QpBackend {
+    if proxy.constraints.is_empty() {
+        kind
+    } else {
+        QpBackend::Clarabel
+    }
+}

@@ -109,8 +109,6 @@ impl Default for SolverSettings {
 impl SolverSettings {
     /// Defaults overridden by a profile's `[solver]` table.
     pub fn from_table(table: &toml::Table) -> Result<SolverSettings, String> {
-        toml::Value::Table(table.clone())
-            .try_into()
-            .map_err(|e: toml::de::Error| format!("[solver]: {e}"))
+        toml::Value::Table(table.clone()).try_into().map_err(|e: toml::de::Error| format!("[solver]: {e}"))
     }
 }

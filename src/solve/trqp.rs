@@ -9,7 +9,7 @@
 //! doubles it; a rejected step quadruples λ and halves the step box. The bounds are the step box
 //! intersected with the proxy ranges.
 
-use super::qp::{QpProblem, QpSolver};
+use super::qp::{LinearConstraints, QpProblem, QpSolver};
 use super::settings::SolverSettings;
 use crate::kinematics::assembly::{EvalWorkspace, Evaluator, FrameProblem};
 use crate::model::proxy::ProxyKind;
@@ -68,11 +68,7 @@ pub struct FrameSolver<'e> {
 }
 
 impl<'e> FrameSolver<'e> {
-    pub fn new(
-        eval: &'e Evaluator<'e>,
-        settings: SolverSettings,
-        qp: Box<dyn QpSolver>,
-    ) -> FrameSolver<'e> {
+    pub fn new(eval: &'e Evaluator<'e>, settings: SolverSettings, qp: Box<dyn QpSolver>) -> FrameSolver<'e> {
         let np = eval.proxy.np();
         let step_box = eval
             .proxy
@@ -147,21 +143,19 @@ impl<'e> FrameSolver<'e> {
                 let d = lambda * gn.h[(k, k)].max(s.damping_floor);
                 self.damp[k] = d;
                 self.h[(k, k)] += d;
-                let b = if self.free[k] {
-                    self.step_box[k] * shrink * self.step_multiplier
-                } else {
-                    0.0
-                };
+                let b = if self.free[k] { self.step_box[k] * shrink * self.step_multiplier } else { 0.0 };
                 self.lb[k] = (-b).max(self.lo[k] - p[k]);
                 self.ub[k] = b.min(self.hi[k] - p[k]);
             }
             self.dp.fill(0.0);
-            let problem = QpProblem {
-                h: &self.h,
-                g: &gn.g,
-                lb: &self.lb,
-                ub: &self.ub,
-            };
+            if !self.eval.proxy.constraints.is_empty() {
+                let c = step_constraints(self.eval.proxy, p);
+                if self.qp.set_linear_constraints(Some(c)).is_err() {
+                    stats.status = FrameStatus::QpFailed;
+                    break;
+                }
+            }
+            let problem = QpProblem { h: &self.h, g: &gn.g, lb: &self.lb, ub: &self.ub };
             if self.qp.solve(&problem, &mut self.dp).is_err() {
                 stats.status = FrameStatus::QpFailed;
                 break;
@@ -169,10 +163,7 @@ impl<'e> FrameSolver<'e> {
             let g_dp = gn.g.dot(&self.dp);
             let hdp = quad_form(&self.h, &self.dp);
             let pred = -g_dp - 0.5 * hdp;
-            let damp_pen: f64 = 0.5
-                * (0..np)
-                    .map(|k| self.damp[k] * self.dp[k] * self.dp[k])
-                    .sum::<f64>();
+            let damp_pen: f64 = 0.5 * (0..np).map(|k| self.damp[k] * self.dp[k] * self.dp[k]).sum::<f64>();
             let step_max = self.dp.amax();
             for k in 0..np {
                 self.trial[k] = p[k] + self.dp[k];
@@ -185,11 +176,7 @@ impl<'e> FrameSolver<'e> {
                 stats.accepted += 1;
                 p.copy_from_slice(&self.trial);
                 stats.energy = e1;
-                stats.rmse_m = if used > 0 {
-                    (sq / used as f64).sqrt()
-                } else {
-                    f64::NAN
-                };
+                stats.rmse_m = if used > 0 { (sq / used as f64).sqrt() } else { f64::NAN };
                 stats.markers_used = used;
                 if rho > 0.75 {
                     lambda = (lambda / 3.0).max(s.damping_min);
@@ -199,16 +186,10 @@ impl<'e> FrameSolver<'e> {
                 let rel = (e0 - e1) / e0.max(f64::MIN_POSITIVE);
                 // The model's error over the step, |Δf_act − Δf_pred|, estimates what another
                 // iteration could still gain when the step was not cut by the damping or the box.
-                let model_error =
-                    (act + damp_pen - pred - damp_pen).abs() / e1.max(f64::MIN_POSITIVE);
-                let exact_model = s.model_error_tol > 0.0
-                    && model_error < s.model_error_tol
-                    && lambda <= s.damping_init;
-                if stats.rmse_m < s.residual_tol_m
-                    || rel < s.rel_decrease_tol
-                    || step_max < s.step_tol
-                    || exact_model
-                {
+                let model_error = (act + damp_pen - pred - damp_pen).abs() / e1.max(f64::MIN_POSITIVE);
+                let exact_model =
+                    s.model_error_tol > 0.0 && model_error < s.model_error_tol && lambda <= s.damping_init;
+                if stats.rmse_m < s.residual_tol_m || rel < s.rel_decrease_tol || step_max < s.step_tol || exact_model {
                     stats.status = FrameStatus::Converged;
                     break;
                 }
@@ -231,19 +212,29 @@ impl<'e> FrameSolver<'e> {
     }
 }
 
+/// The profile's constraints `lo ≤ a·p ≤ hi` as constraints on a step from `p`.
+pub fn step_constraints(proxy: &crate::model::proxy::ProxyMap, p: &[f64]) -> LinearConstraints {
+    let m = proxy.constraints.len();
+    let mut c = LinearConstraints { a: DMatrix::zeros(m, proxy.np()), lo: DVector::zeros(m), hi: DVector::zeros(m) };
+    for (i, pc) in proxy.constraints.iter().enumerate() {
+        for &(k, coef) in &pc.coefficients {
+            c.a[(i, k)] += coef;
+        }
+        let v = pc.value(p);
+        c.lo[i] = pc.lo - v;
+        c.hi[i] = pc.hi - v;
+    }
+    c
+}
+
 /// `xᵀ H x` without allocating.
 fn quad_form(h: &DMatrix<f64>, x: &DVector<f64>) -> f64 {
     let n = x.len();
-    (0..n)
-        .map(|c| x[c] * (0..n).map(|r| h[(r, c)] * x[r]).sum::<f64>())
-        .sum()
+    (0..n).map(|c| x[c] * (0..n).map(|r| h[(r, c)] * x[r]).sum::<f64>()).sum()
 }
 
 impl std::fmt::Debug for FrameSolver<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("FrameSolver")
-            .field("qp", &self.qp.name())
-            .field("settings", &self.settings)
-            .finish()
+        f.debug_struct("FrameSolver").field("qp", &self.qp.name()).field("settings", &self.settings).finish()
     }
 }

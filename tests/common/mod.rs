@@ -5,8 +5,8 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use smocap::model::{
-    Body, Coordinate, CoordinateCoupling, CoordinateKind, CubicSpline, Function, Joint, Marker,
-    Model, Motion, MotionKind,
+    Body, Coordinate, CoordinateCoupling, CoordinateKind, CubicSpline, Function, Joint, Marker, Model, Motion,
+    MotionKind,
 };
 
 pub fn rng(seed: u64) -> ChaCha8Rng {
@@ -15,11 +15,7 @@ pub fn rng(seed: u64) -> ChaCha8Rng {
 
 fn unit(r: &mut ChaCha8Rng) -> Vector3<f64> {
     loop {
-        let v = Vector3::new(
-            r.random_range(-1.0..1.0),
-            r.random_range(-1.0..1.0),
-            r.random_range(-1.0..1.0),
-        );
+        let v = Vector3::new(r.random_range(-1.0..1.0), r.random_range(-1.0..1.0), r.random_range(-1.0..1.0));
         if v.norm() > 0.2 {
             return v.normalize();
         }
@@ -27,28 +23,17 @@ fn unit(r: &mut ChaCha8Rng) -> Vector3<f64> {
 }
 
 fn iso(r: &mut ChaCha8Rng, reach: f64) -> Isometry3<f64> {
-    let t = Translation3::new(
-        r.random_range(-reach..reach),
-        r.random_range(-reach..reach),
-        r.random_range(-reach..reach),
-    );
-    Isometry3::from_parts(
-        t,
-        UnitQuaternion::from_scaled_axis(unit(r) * r.random_range(0.0..2.0)),
-    )
+    let t =
+        Translation3::new(r.random_range(-reach..reach), r.random_range(-reach..reach), r.random_range(-reach..reach));
+    Isometry3::from_parts(t, UnitQuaternion::from_scaled_axis(unit(r) * r.random_range(0.0..2.0)))
 }
 
 /// One of every function kind, chosen by `kind % 7`.
 pub fn function(r: &mut ChaCha8Rng, kind: usize) -> Function {
     match kind % 7 {
         0 => Function::IDENTITY,
-        1 => Function::Linear {
-            slope: r.random_range(-2.0..2.0),
-            intercept: r.random_range(-0.3..0.3),
-        },
-        2 => Function::Polynomial {
-            coefficients: (0..4).map(|_| r.random_range(-0.5..0.5)).collect(),
-        },
+        1 => Function::Linear { slope: r.random_range(-2.0..2.0), intercept: r.random_range(-0.3..0.3) },
+        2 => Function::Polynomial { coefficients: (0..4).map(|_| r.random_range(-0.5..0.5)).collect() },
         3 => {
             let x: Vec<f64> = (0..6).map(|i| -2.5 + i as f64).collect();
             let y: Vec<f64> = x.iter().map(|_| r.random_range(-0.2..0.2)).collect();
@@ -56,20 +41,13 @@ pub fn function(r: &mut ChaCha8Rng, kind: usize) -> Function {
         }
         4 => {
             let x = vec![-3.0, -1.05, 0.37, 3.0];
-            Function::PiecewiseLinear {
-                x,
-                y: (0..4).map(|_| r.random_range(-0.5..0.5)).collect(),
-            }
+            Function::PiecewiseLinear { x, y: (0..4).map(|_| r.random_range(-0.5..0.5)).collect() }
         }
         5 => Function::Multiplier {
             scale: r.random_range(0.5..1.5),
-            inner: Box::new(Function::Polynomial {
-                coefficients: vec![0.1, 0.8, 0.2],
-            }),
+            inner: Box::new(Function::Polynomial { coefficients: vec![0.1, 0.8, 0.2] }),
         },
-        _ => Function::Constant {
-            value: r.random_range(-0.3..0.3),
-        },
+        _ => Function::Constant { value: r.random_range(-0.3..0.3) },
     }
 }
 
@@ -83,11 +61,7 @@ pub fn random_model(seed: u64, nb: usize) -> Model {
     let mut markers = Vec::new();
     let mut counter = 0usize;
     for b in 0..nb {
-        let parent = if b == 0 {
-            None
-        } else {
-            Some(r.random_range(0..b))
-        };
+        let parent = if b == 0 { None } else { Some(r.random_range(0..b)) };
         let start = motions.len();
         let nmot = if b == 0 { 6 } else { r.random_range(1..4) };
         for i in 0..nmot {
@@ -116,27 +90,10 @@ pub fn random_model(seed: u64, nb: usize) -> Model {
                 clamped: true,
             });
             counter += 1;
-            let func = if b == 0 {
-                Function::IDENTITY
-            } else {
-                function(&mut r, counter)
-            };
-            let weights =
-                (kind == MotionKind::Translation && parent.is_some() && r.random_range(0..2) == 0)
-                    .then(|| {
-                        Vector3::new(
-                            r.random_range(0.0..1.0),
-                            r.random_range(0.0..1.0),
-                            r.random_range(0.0..1.0),
-                        )
-                    });
-            motions.push(Motion {
-                kind,
-                axis: unit(&mut r),
-                coordinate: Some(c),
-                func,
-                parent_scale_weights: weights,
-            });
+            let func = if b == 0 { Function::IDENTITY } else { function(&mut r, counter) };
+            let weights = (kind == MotionKind::Translation && parent.is_some() && r.random_range(0..2) == 0)
+                .then(|| Vector3::new(r.random_range(0.0..1.0), r.random_range(0.0..1.0), r.random_range(0.0..1.0)));
+            motions.push(Motion { kind, axis: unit(&mut r), coordinate: Some(c), func, parent_scale_weights: weights });
         }
         bodies.push(Body {
             name: format!("b{b}"),
@@ -152,11 +109,7 @@ pub fn random_model(seed: u64, nb: usize) -> Model {
             markers.push(Marker {
                 name: format!("m{b}_{k}"),
                 body: b,
-                offset: Vector3::new(
-                    r.random_range(-0.2..0.2),
-                    r.random_range(-0.2..0.2),
-                    r.random_range(-0.2..0.2),
-                ),
+                offset: Vector3::new(r.random_range(-0.2..0.2), r.random_range(-0.2..0.2), r.random_range(-0.2..0.2)),
                 weight: r.random_range(0.5..2.0),
             });
         }
@@ -165,19 +118,9 @@ pub fn random_model(seed: u64, nb: usize) -> Model {
     let couplings = vec![CoordinateCoupling {
         dependent: nq - 1,
         independent: nq - 2,
-        func: Function::Polynomial {
-            coefficients: vec![0.05, 0.7, -0.1],
-        },
+        func: Function::Polynomial { coefficients: vec![0.05, 0.7, -0.1] },
     }];
-    Model::new(
-        format!("random{seed}"),
-        bodies,
-        motions,
-        coords,
-        markers,
-        couplings,
-    )
-    .expect("valid random model")
+    Model::new(format!("random{seed}"), bodies, motions, coords, markers, couplings).expect("valid random model")
 }
 
 /// A random state `y = [q; s]` with scales in [0.7, 1.3].
@@ -185,11 +128,7 @@ pub fn random_state(model: &Model, seed: u64) -> Vec<f64> {
     let mut r = rng(seed);
     let mut y = vec![0.0; model.ny()];
     for (j, v) in y.iter_mut().enumerate() {
-        *v = if j < model.nq() {
-            r.random_range(-1.5..1.5)
-        } else {
-            r.random_range(0.7..1.3)
-        };
+        *v = if j < model.nq() { r.random_range(-1.5..1.5) } else { r.random_range(0.7..1.3) };
     }
     y
 }

@@ -19,8 +19,7 @@ impl<'a> Attrs<'a> {
     }
     fn overlay(&mut self, node: Node<'a, 'a>) {
         for attr in node.attributes() {
-            self.0
-                .insert(attr.name(), (attr.range().start, attr.value()));
+            self.0.insert(attr.name(), (attr.range().start, attr.value()));
         }
     }
     pub fn get(&self, key: &str) -> Option<(usize, &'a str)> {
@@ -57,28 +56,14 @@ impl<'a> Ctx<'a> {
     pub fn new(doc: &'a Document<'a>, file: &'a str) -> Ctx<'a> {
         let classes = HashMap::from([("main", Class::default())]);
         let angle = std::f64::consts::PI / 180.0;
-        Ctx {
-            doc,
-            file,
-            warnings: Vec::new(),
-            angle,
-            eulerseq: *b"xyz",
-            autolimits: true,
-            classes,
-        }
+        Ctx { doc, file, warnings: Vec::new(), angle, eulerseq: *b"xyz", autolimits: true, classes }
     }
 
     /// Error at byte offset `pos` about `element`.
     pub fn err_at(&self, pos: usize, element: &str, message: impl Into<String>) -> MjcfError {
         let p = self.doc.text_pos_at(pos);
         let (file, element, message) = (self.file.to_string(), element.to_string(), message.into());
-        MjcfError::Element {
-            file,
-            line: p.row,
-            column: p.col,
-            element,
-            message,
-        }
+        MjcfError::Element { file, line: p.row, column: p.col, element, message }
     }
     /// Error located at `node`'s start tag.
     pub fn err(&self, node: Node, message: impl Into<String>) -> MjcfError {
@@ -86,22 +71,13 @@ impl<'a> Ctx<'a> {
     }
     pub fn warn(&mut self, node: Node, message: &str) {
         let p = self.doc.text_pos_at(node.range().start);
-        self.warnings.push(format!(
-            "{}:{}: <{}>: {message}",
-            self.file,
-            p.row,
-            node.tag_name().name()
-        ));
+        self.warnings.push(format!("{}:{}: <{}>: {message}", self.file, p.row, node.tag_name().name()));
     }
 
     pub fn read_compiler(&mut self, c: Node<'a, 'a>) -> Result<(), MjcfError> {
         let a = Attrs::own(c);
         let bad = |key: &str, v: &str, expected: &str| {
-            self.err_at(
-                a.pos(key, c),
-                "compiler",
-                format!("invalid {key} '{v}': expected {expected}"),
-            )
+            self.err_at(a.pos(key, c), "compiler", format!("invalid {key} '{v}': expected {expected}"))
         };
         let angle = match a.get("angle").map(|v| v.1) {
             None => self.angle,
@@ -124,13 +100,7 @@ impl<'a> Ctx<'a> {
         };
         match a.get("coordinate").map(|v| v.1) {
             None | Some("local") => {}
-            Some(v) => {
-                return Err(bad(
-                    "coordinate",
-                    v,
-                    "local (global coordinates are not supported)",
-                ))
-            }
+            Some(v) => return Err(bad("coordinate", v, "local (global coordinates are not supported)")),
         }
         (self.angle, self.eulerseq, self.autolimits) = (angle, eulerseq, autolimits);
         Ok(())
@@ -145,9 +115,7 @@ impl<'a> Ctx<'a> {
                     let name = d.attribute("class").unwrap_or("main");
                     (name, (name != "main").then_some("main"))
                 } else {
-                    let parent = d
-                        .parent_element()
-                        .and_then(|p| node_class.get(&p.id()).copied());
+                    let parent = d.parent_element().and_then(|p| node_class.get(&p.id()).copied());
                     let Some(parent) = parent else {
                         return Err(self.err(d, "<default> must be nested directly in <default>"));
                     };
@@ -158,10 +126,7 @@ impl<'a> Ctx<'a> {
                 };
                 let mut class = match parent {
                     Some(p) if self.classes.contains_key(name) => {
-                        return Err(self.err(
-                            d,
-                            format!("duplicate default class '{name}' (parent '{p}')"),
-                        ));
+                        return Err(self.err(d, format!("duplicate default class '{name}' (parent '{p}')")));
                     }
                     Some(p) => self.classes.get(p).cloned().unwrap_or_default(),
                     None => self.classes.get(name).cloned().unwrap_or_default(),
@@ -197,52 +162,33 @@ impl<'a> Ctx<'a> {
         pick: impl for<'c> Fn(&'c Class<'a>) -> &'c Attrs<'a>,
     ) -> Result<Attrs<'a>, MjcfError> {
         let name = node.attribute("class").unwrap_or(inherited);
-        let class = self
-            .classes
-            .get(name)
-            .ok_or_else(|| self.err(node, format!("unknown default class '{name}'")))?;
+        let class = self.classes.get(name).ok_or_else(|| self.err(node, format!("unknown default class '{name}'")))?;
         let mut a = pick(class).clone();
         a.overlay(node);
         Ok(a)
     }
 
     /// Exactly `N` finite numbers from attribute `key`, if present.
-    pub fn nums<const N: usize>(
-        &self,
-        node: Node,
-        a: &Attrs,
-        key: &str,
-    ) -> Result<Option<[f64; N]>, MjcfError> {
+    pub fn nums<const N: usize>(&self, node: Node, a: &Attrs, key: &str) -> Result<Option<[f64; N]>, MjcfError> {
         let Some((pos, text)) = a.get(key) else {
             return Ok(None);
         };
         match parse_numbers(text).and_then(|v| <[f64; N]>::try_from(v).ok()) {
             Some(v) => Ok(Some(v)),
-            None => Err(self.err_at(
-                pos,
-                node.tag_name().name(),
-                format!("{key} '{text}': expected {N} finite numbers"),
-            )),
+            None => {
+                Err(self.err_at(pos, node.tag_name().name(), format!("{key} '{text}': expected {N} finite numbers")))
+            }
         }
     }
-    pub fn vec3(
-        &self,
-        node: Node,
-        a: &Attrs,
-        key: &str,
-    ) -> Result<Option<Vector3<f64>>, MjcfError> {
+    pub fn vec3(&self, node: Node, a: &Attrs, key: &str) -> Result<Option<Vector3<f64>>, MjcfError> {
         Ok(self.nums::<3>(node, a, key)?.map(Vector3::from))
     }
 
     /// Frame orientation from at most one of `quat`, `axisangle`, `euler`, `xyaxes`, `zaxis`.
     pub fn orientation(&self, node: Node, a: &Attrs) -> Result<UnitQuaternion<f64>, MjcfError> {
-        let present: Vec<&str> = ORIENTATIONS
-            .into_iter()
-            .filter(|k| a.get(k).is_some())
-            .collect();
+        let present: Vec<&str> = ORIENTATIONS.into_iter().filter(|k| a.get(k).is_some()).collect();
         let el = node.tag_name().name();
-        let bad =
-            |key: &str, what: &str| self.err_at(a.pos(key, node), el, format!("{key}: {what}"));
+        let bad = |key: &str, what: &str| self.err_at(a.pos(key, node), el, format!("{key}: {what}"));
         if let [first, second, ..] = present[..] {
             let msg = format!(
                 "conflicting orientation attributes '{first}' and '{second}': use at most one of {}",
@@ -270,10 +216,7 @@ impl<'a> Ctx<'a> {
             Some("axisangle") => {
                 let [x, y, z, angle] = self.nums::<4>(node, a, "axisangle")?.unwrap_or_default();
                 let axis = unit(Vector3::new(x, y, z), "axisangle")?;
-                Ok(UnitQuaternion::from_axis_angle(
-                    &Unit::new_unchecked(axis),
-                    angle * self.angle,
-                ))
+                Ok(UnitQuaternion::from_axis_angle(&Unit::new_unchecked(axis), angle * self.angle))
             }
             Some("euler") => {
                 let e = self.nums::<3>(node, a, "euler")?.unwrap_or_default();
@@ -286,11 +229,7 @@ impl<'a> Ctx<'a> {
                     };
                     let r = UnitQuaternion::from_axis_angle(&v, angle * self.angle);
                     // Rotating (lowercase) axes post-multiply, fixed (uppercase) axes pre-multiply.
-                    q = if axis.is_ascii_lowercase() {
-                        q * r
-                    } else {
-                        r * q
-                    };
+                    q = if axis.is_ascii_lowercase() { q * r } else { r * q };
                 }
                 Ok(q)
             }
@@ -308,11 +247,7 @@ impl<'a> Ctx<'a> {
                 let v = unit(v, "zaxis")?;
                 let c = Vector3::z().cross(&v);
                 let s = c.norm();
-                let axis = if s < 1e-10 {
-                    Vector3::x_axis()
-                } else {
-                    Unit::new_unchecked(c / s)
-                };
+                let axis = if s < 1e-10 { Vector3::x_axis() } else { Unit::new_unchecked(c / s) };
                 Ok(UnitQuaternion::from_axis_angle(&axis, s.atan2(v.z)))
             }
             None => Ok(UnitQuaternion::identity()),
@@ -322,7 +257,5 @@ impl<'a> Ctx<'a> {
 
 /// Whitespace-separated finite numbers; `None` when any is malformed or non-finite.
 pub(super) fn parse_numbers(text: &str) -> Option<Vec<f64>> {
-    text.split_ascii_whitespace()
-        .map(|t| t.parse::<f64>().ok().filter(|v| v.is_finite()))
-        .collect()
+    text.split_ascii_whitespace().map(|t| t.parse::<f64>().ok().filter(|v| v.is_finite())).collect()
 }

@@ -108,10 +108,7 @@ impl BoxQp {
 
     /// Solver with the given settings.
     pub fn with_settings(settings: BoxQpSettings) -> Self {
-        Self {
-            settings,
-            ..Self::default()
-        }
+        Self { settings, ..Self::default() }
     }
 
     /// Solver with workspace preallocated for `n` variables.
@@ -125,13 +122,7 @@ impl BoxQp {
         if self.grad.len() >= n {
             return;
         }
-        for v in [
-            &mut self.grad,
-            &mut self.dir,
-            &mut self.cand,
-            &mut self.step,
-            &mut self.hd,
-        ] {
+        for v in [&mut self.grad, &mut self.dir, &mut self.cand, &mut self.step, &mut self.hd] {
             v.resize(n, 0.0);
         }
         self.inv_diag.resize(n, 0.0);
@@ -200,18 +191,13 @@ impl QpSolver for BoxQp {
         let (h, g) = (problem.h.as_slice(), problem.g.as_slice());
         let (lb, ub) = (problem.lb.as_slice(), problem.ub.as_slice());
         let x = x.as_mut_slice();
-        let (max_iter, min_rel) = (
-            self.settings.max_iterations,
-            self.settings.min_relative_improvement,
-        );
+        let (max_iter, min_rel) = (self.settings.max_iterations, self.settings.min_relative_improvement);
         let g_scale = 1.0 + g.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
         let tol = self.settings.gradient_tolerance;
         let (gtol, stall_tol) = (tol * g_scale, tol.sqrt() * g_scale);
 
         for i in 0..n {
-            x[i] = if x[i].is_finite() { x[i] } else { 0.0 }
-                .max(lb[i])
-                .min(ub[i]);
+            x[i] = if x[i].is_finite() { x[i] } else { 0.0 }.max(lb[i]).min(ub[i]);
         }
         let mut f = self.gradient(h, g, x);
         if !f.is_finite() {
@@ -221,10 +207,7 @@ impl QpSolver for BoxQp {
             }
             f = self.gradient(h, g, x);
             if !f.is_finite() {
-                return Err(QpError::NonFinite {
-                    what: "objective",
-                    index: 0,
-                });
+                return Err(QpError::NonFinite { what: "objective", index: 0 });
             }
         }
 
@@ -249,10 +232,7 @@ impl QpSolver for BoxQp {
             self.newton_direction();
             let slope: f64 = self.free.iter().map(|&i| self.grad[i] * self.dir[i]).sum();
             if slope.is_nan() {
-                return Err(QpError::NonFinite {
-                    what: "newton direction",
-                    index: 0,
-                });
+                return Err(QpError::NonFinite { what: "newton direction", index: 0 });
             }
             if slope >= 0.0 {
                 status = QpStatus::Solved; // gradient at rounding level
@@ -278,11 +258,7 @@ impl QpSolver for BoxQp {
                 break;
             }
         }
-        Ok(QpStats {
-            status,
-            iterations,
-            objective: objective(x, &self.grad[..n], g),
-        })
+        Ok(QpStats { status, iterations, objective: objective(x, &self.grad[..n], g) })
     }
 }
 
@@ -338,11 +314,7 @@ impl BoxQp {
         self.breaks.clear();
         for &i in &self.free {
             let d = self.dir[i];
-            let tau = if d > 0.0 {
-                (ub[i] - x[i]) / d
-            } else {
-                (lb[i] - x[i]) / d
-            };
+            let tau = if d > 0.0 { (ub[i] - x[i]) / d } else { (lb[i] - x[i]) / d };
             if d != 0.0 && tau < 1.0 {
                 self.breaks.push((tau.max(0.0), i));
             }
@@ -396,11 +368,7 @@ impl BoxQp {
     ) -> Result<Option<(f64, f64)>, QpError> {
         let n = x.len();
         let st = &self.settings;
-        let beta = if st.line_search_factor > 0.0 && st.line_search_factor < 1.0 {
-            st.line_search_factor
-        } else {
-            0.5
-        };
+        let beta = if st.line_search_factor > 0.0 && st.line_search_factor < 1.0 { st.line_search_factor } else { 0.5 };
         let (armijo, min_step) = (st.armijo, st.min_step);
         let (mut t, mut have_hd) = self.path_minimiser(h, x, lb, ub);
         for _ in 0..MAX_LINE_SEARCH {
@@ -409,11 +377,7 @@ impl BoxQp {
             }
             let mut clipped = false;
             for i in 0..n {
-                let raw = if self.clamped[i] {
-                    x[i]
-                } else {
-                    x[i] + t * self.dir[i]
-                };
+                let raw = if self.clamped[i] { x[i] } else { x[i] + t * self.dir[i] };
                 let c = raw.max(lb[i]).min(ub[i]);
                 clipped |= c != raw;
                 self.cand[i] = c;
@@ -447,12 +411,7 @@ impl BoxQp {
 fn objective(x: &[f64], grad: &[f64], g: &[f64]) -> f64 {
     let finite = grad.iter().all(|v| v.is_finite());
     if finite {
-        0.5 * x
-            .iter()
-            .zip(grad)
-            .zip(g)
-            .map(|((a, b), c)| a * (b + c))
-            .sum::<f64>()
+        0.5 * x.iter().zip(grad).zip(g).map(|((a, b), c)| a * (b + c)).sum::<f64>()
     } else {
         f64::NAN
     }

@@ -18,8 +18,8 @@
 use super::{LinearConstraints, QpError, QpProblem, QpSolver, QpStats, QpStatus};
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
-    DataUpdateError, DefaultSettings, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus,
-    SupportedConeT, ZeroConeT,
+    DataUpdateError, DefaultSettings, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus, SupportedConeT,
+    ZeroConeT,
 };
 use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
@@ -139,10 +139,7 @@ impl ClarabelQp {
 
     /// Box constraints plus `constraints` (checked against the problem at each solve).
     pub fn with_constraints(constraints: LinearConstraints, settings: ClarabelQpSettings) -> Self {
-        Self {
-            constraints: Some(constraints),
-            ..Self::new(settings)
-        }
+        Self { constraints: Some(constraints), ..Self::new(settings) }
     }
 
     /// Replaces the general constraints (forces a rebuild at the next solve).
@@ -164,24 +161,14 @@ impl ClarabelQp {
                 c.lo.len(),
                 c.hi.len()
             );
-            return Err(QpError::Backend {
-                backend: BACKEND,
-                status,
-            });
+            return Err(QpError::Backend { backend: BACKEND, status });
         }
         if let Some(index) = c.a.iter().position(|v| !v.is_finite()) {
             return Err(QpError::NonFinite { what: "a", index });
         }
         for (k, (&lo, &hi)) in c.lo.iter().zip(c.hi.iter()).enumerate() {
-            if lo.is_nan()
-                || hi.is_nan()
-                || lo > hi
-                || lo == f64::INFINITY
-                || hi == f64::NEG_INFINITY
-            {
-                return Err(QpError::Infeasible(format!(
-                    "constraint {k} has bounds [{lo}, {hi}]"
-                )));
+            if lo.is_nan() || hi.is_nan() || lo > hi || lo == f64::INFINITY || hi == f64::NEG_INFINITY {
+                return Err(QpError::Infeasible(format!("constraint {k} has bounds [{lo}, {hi}]")));
             }
         }
         Ok(())
@@ -190,29 +177,12 @@ impl ClarabelQp {
     /// Row list: equality rows first (count returned), then inequality rows.
     fn rows(&self) -> (Vec<Row>, usize) {
         let con_sides: Vec<Sides> = match &self.constraints {
-            Some(c) => {
-                c.lo.iter()
-                    .zip(c.hi.iter())
-                    .map(|(&l, &h)| Sides::of(l, h))
-                    .collect()
-            }
+            Some(c) => c.lo.iter().zip(c.hi.iter()).map(|(&l, &h)| Sides::of(l, h)).collect(),
             None => Vec::new(),
         };
         let mut rows = Vec::new();
-        rows.extend(
-            self.sides
-                .iter()
-                .enumerate()
-                .filter(|(_, s)| **s == Sides::Equal)
-                .map(|(i, _)| Row::Var(i, 1.0)),
-        );
-        rows.extend(
-            con_sides
-                .iter()
-                .enumerate()
-                .filter(|(_, s)| **s == Sides::Equal)
-                .map(|(k, _)| Row::Con(k, 1.0)),
-        );
+        rows.extend(self.sides.iter().enumerate().filter(|(_, s)| **s == Sides::Equal).map(|(i, _)| Row::Var(i, 1.0)));
+        rows.extend(con_sides.iter().enumerate().filter(|(_, s)| **s == Sides::Equal).map(|(k, _)| Row::Con(k, 1.0)));
         let n_eq = rows.len();
         let push_ineq = |rows: &mut Vec<Row>, s: Sides, make: &dyn Fn(f64) -> Row| {
             if matches!(s, Sides::Upper | Sides::Both) {
@@ -234,14 +204,7 @@ impl ClarabelQp {
     fn build(&mut self, problem: &QpProblem<'_>) -> Result<(), QpError> {
         let n = problem.g.len();
         let (rows, n_eq) = self.rows();
-        fill_data(
-            problem,
-            self.constraints.as_ref(),
-            &rows,
-            &mut self.p_vals,
-            &mut self.q,
-            &mut self.b,
-        );
+        fill_data(problem, self.constraints.as_ref(), &rows, &mut self.p_vals, &mut self.q, &mut self.b);
         let colptr_p: Vec<usize> = (0..=n).map(|j| j * (j + 1) / 2).collect();
         let rowval_p: Vec<usize> = (0..n).flat_map(|j| 0..=j).collect();
         let p = CscMatrix::new(n, n, colptr_p, rowval_p, self.p_vals.clone());
@@ -270,28 +233,19 @@ impl ClarabelQp {
         if rows.len() > n_eq {
             cones.push(NonnegativeConeT(rows.len() - n_eq));
         }
-        let solver = DefaultSolver::new(
-            &p,
-            &self.q,
-            &a,
-            &self.b,
-            &cones,
-            self.settings.to_clarabel(),
-        )
-        .map_err(|e| QpError::Backend {
-            backend: BACKEND,
-            status: e.to_string(),
-        })?;
-        self.built = Some(Built {
-            solver,
-            var_sides: self.sides.clone(),
-            rows,
-        });
+        let solver = DefaultSolver::new(&p, &self.q, &a, &self.b, &cones, self.settings.to_clarabel())
+            .map_err(|e| QpError::Backend { backend: BACKEND, status: e.to_string() })?;
+        self.built = Some(Built { solver, var_sides: self.sides.clone(), rows });
         Ok(())
     }
 }
 
 impl QpSolver for ClarabelQp {
+    fn set_linear_constraints(&mut self, constraints: Option<LinearConstraints>) -> Result<(), QpError> {
+        self.set_constraints(constraints);
+        Ok(())
+    }
+
     fn name(&self) -> &'static str {
         BACKEND
     }
@@ -303,28 +257,12 @@ impl QpSolver for ClarabelQp {
             *x = DVector::zeros(n);
         }
         self.sides.clear();
-        self.sides.extend(
-            problem
-                .lb
-                .iter()
-                .zip(problem.ub.iter())
-                .map(|(&l, &u)| Sides::of(l, u)),
-        );
+        self.sides.extend(problem.lb.iter().zip(problem.ub.iter()).map(|(&l, &u)| Sides::of(l, u)));
 
         match self.built.as_mut() {
             Some(b) if b.var_sides == self.sides => {
-                fill_data(
-                    problem,
-                    self.constraints.as_ref(),
-                    &b.rows,
-                    &mut self.p_vals,
-                    &mut self.q,
-                    &mut self.b,
-                );
-                let err = |e: DataUpdateError| QpError::Backend {
-                    backend: BACKEND,
-                    status: e.to_string(),
-                };
+                fill_data(problem, self.constraints.as_ref(), &b.rows, &mut self.p_vals, &mut self.q, &mut self.b);
+                let err = |e: DataUpdateError| QpError::Backend { backend: BACKEND, status: e.to_string() };
                 b.solver.update_P(&self.p_vals).map_err(err)?;
                 b.solver.update_q(&self.q).map_err(err)?;
                 b.solver.update_b(&self.b).map_err(err)?;
@@ -332,10 +270,7 @@ impl QpSolver for ClarabelQp {
             _ => self.build(problem)?,
         }
         let Some(built) = self.built.as_mut() else {
-            return Err(QpError::Backend {
-                backend: BACKEND,
-                status: "solver not built".into(),
-            });
+            return Err(QpError::Backend { backend: BACKEND, status: "solver not built".into() });
         };
         built.solver.solve();
         let sol = &built.solver.solution;
@@ -343,33 +278,20 @@ impl QpSolver for ClarabelQp {
             SolverStatus::Solved | SolverStatus::AlmostSolved => QpStatus::Solved,
             SolverStatus::MaxIterations | SolverStatus::MaxTime => QpStatus::MaxIterations,
             SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => {
-                return Err(QpError::Infeasible(format!(
-                    "clarabel status {:?}",
-                    sol.status
-                )));
+                return Err(QpError::Infeasible(format!("clarabel status {:?}", sol.status)));
             }
             other => {
-                return Err(QpError::Backend {
-                    backend: BACKEND,
-                    status: format!("{other:?}"),
-                });
+                return Err(QpError::Backend { backend: BACKEND, status: format!("{other:?}") });
             }
         };
         if sol.x.len() != n || sol.x.iter().any(|v| !v.is_finite()) {
-            return Err(QpError::Backend {
-                backend: BACKEND,
-                status: "non-finite solution".into(),
-            });
+            return Err(QpError::Backend { backend: BACKEND, status: "non-finite solution".into() });
         }
         for (i, xi) in x.iter_mut().enumerate() {
             // Interior-point iterates may sit a hair outside the box; project.
             *xi = sol.x[i].max(problem.lb[i]).min(problem.ub[i]);
         }
-        Ok(QpStats {
-            status,
-            iterations: sol.iterations,
-            objective: problem.objective(x),
-        })
+        Ok(QpStats { status, iterations: sol.iterations, objective: problem.objective(x) })
     }
 }
 

@@ -54,16 +54,8 @@ pub struct QpStats {
 /// Failures that leave no usable solution.
 #[derive(Debug, thiserror::Error)]
 pub enum QpError {
-    #[error(
-        "QP dimensions disagree: H is {h_rows}x{h_cols}, g has {g}, bounds have {lb} and {ub}"
-    )]
-    Dimensions {
-        h_rows: usize,
-        h_cols: usize,
-        g: usize,
-        lb: usize,
-        ub: usize,
-    },
+    #[error("QP dimensions disagree: H is {h_rows}x{h_cols}, g has {g}, bounds have {lb} and {ub}")]
+    Dimensions { h_rows: usize, h_cols: usize, g: usize, lb: usize, ub: usize },
     #[error("QP bounds are inconsistent at variable {index}: lb = {lb} > ub = {ub}")]
     InconsistentBounds { index: usize, lb: f64, ub: f64 },
     #[error("QP Hessian is not positive definite on the free set (pivot {pivot} = {value:e})")]
@@ -71,10 +63,7 @@ pub enum QpError {
     #[error("QP is infeasible: {0}")]
     Infeasible(String),
     #[error("QP backend {backend} failed: {status}")]
-    Backend {
-        backend: &'static str,
-        status: String,
-    },
+    Backend { backend: &'static str, status: String },
     /// NaN or infinity where a finite number is required (`what` names the input: "h", "g",
     /// "a", …; `index` is the flat index into it, column-major for matrices).
     #[error("QP input {what} has a non-finite entry at index {index}")]
@@ -90,13 +79,7 @@ impl QpProblem<'_> {
         let n = self.g.len();
         let (h_rows, h_cols) = self.h.shape();
         if h_rows != n || h_cols != n || self.lb.len() != n || self.ub.len() != n {
-            return Err(QpError::Dimensions {
-                h_rows,
-                h_cols,
-                g: n,
-                lb: self.lb.len(),
-                ub: self.ub.len(),
-            });
+            return Err(QpError::Dimensions { h_rows, h_cols, g: n, lb: self.lb.len(), ub: self.ub.len() });
         }
         // Branch-free scans (they vectorise); locate the offender only on failure.
         let all_finite = |v: &[f64]| !v.iter().fold(false, |bad, x| bad | !x.is_finite());
@@ -110,10 +93,7 @@ impl QpProblem<'_> {
             let col = &h[j * n..=j * n + j];
             if !all_finite(col) {
                 let i = col.iter().position(|v| !v.is_finite()).unwrap_or(0);
-                return Err(QpError::NonFinite {
-                    what: "h",
-                    index: j * n + i,
-                });
+                return Err(QpError::NonFinite { what: "h", index: j * n + i });
             }
         }
         for (index, (&lb, &ub)) in self.lb.iter().zip(self.ub.iter()).enumerate() {
@@ -121,9 +101,7 @@ impl QpProblem<'_> {
                 return Err(QpError::InconsistentBounds { index, lb, ub });
             }
             if lb == f64::INFINITY || ub == f64::NEG_INFINITY {
-                return Err(QpError::Infeasible(format!(
-                    "variable {index} has bounds [{lb}, {ub}]"
-                )));
+                return Err(QpError::Infeasible(format!("variable {index} has bounds [{lb}, {ub}]")));
             }
         }
         Ok(n)
@@ -154,4 +132,16 @@ pub trait QpSolver: Send {
     /// Solve `problem`. On entry `x` holds the warm start (it may be outside the bounds; it is
     /// projected first); on exit it holds the solution.
     fn solve(&mut self, problem: &QpProblem<'_>, x: &mut DVector<f64>) -> Result<QpStats, QpError>;
+
+    /// Sets general linear constraints `lo ≤ A x ≤ hi` for the following solves (`None` clears
+    /// them). Backends that handle bounds only refuse constraints.
+    fn set_linear_constraints(&mut self, constraints: Option<LinearConstraints>) -> Result<(), QpError> {
+        match constraints {
+            None => Ok(()),
+            Some(_) => Err(QpError::Backend {
+                backend: self.name(),
+                status: "general linear constraints need the clarabel backend".into(),
+            }),
+        }
+    }
 }

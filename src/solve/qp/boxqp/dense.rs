@@ -7,12 +7,7 @@
 /// `1/L_jj` in `inv_diag`. Columns are produced in pairs, each pass subtracting four earlier
 /// columns: the inner loop is a vectorisable multi-axpy with no reduction chain.
 /// `Err((j, pivot))` if pivot `j` is `≤ thr` (or NaN).
-pub(super) fn cholesky(
-    a: &mut [f64],
-    inv_diag: &mut [f64],
-    nf: usize,
-    thr: f64,
-) -> Result<(), (usize, f64)> {
+pub(super) fn cholesky(a: &mut [f64], inv_diag: &mut [f64], nf: usize, thr: f64) -> Result<(), (usize, f64)> {
     let mut j = 0;
     while j < nf {
         let (done, rest) = a.split_at_mut(j * nf);
@@ -37,9 +32,7 @@ pub(super) fn cholesky(
             let (t0, t1, t2, t3) = (c0[1], c1[1], c2[1], c3[1]);
             cj[0] -= (s0 * s0 + s1 * s1) + (s2 * s2 + s3 * s3);
             let rows = cj[1..].iter_mut().zip(cj1.iter_mut());
-            for (((((o, p), &a0), &a1), &a2), &a3) in
-                rows.zip(&c0[1..]).zip(&c1[1..]).zip(&c2[1..]).zip(&c3[1..])
-            {
+            for (((((o, p), &a0), &a1), &a2), &a3) in rows.zip(&c0[1..]).zip(&c1[1..]).zip(&c2[1..]).zip(&c3[1..]) {
                 *o -= (a0 * s0 + a1 * s1) + (a2 * s2 + a3 * s3);
                 *p -= (a0 * t0 + a1 * t1) + (a2 * t2 + a3 * t3);
             }
