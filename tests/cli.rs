@@ -14,6 +14,17 @@ fn tmp(name: &str) -> PathBuf {
     dir.join(name)
 }
 
+/// A one-marker TRC file (mm, 100 Hz) with the given data rows (`frame\ttime\tx\ty\tz`).
+fn one_marker_trc(name: &str, label: &str, rows: &[&str]) -> PathBuf {
+    let p = tmp(name);
+    let header = format!(
+        "PathFileType\t4\t(X/Y/Z)\t{name}\nDataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\n100\t100\t{}\t1\tmm\nFrame#\tTime\t{label}\t\t\n\t\tX1\tY1\tZ1\n",
+        rows.len()
+    );
+    std::fs::write(&p, header + &rows.join("\n") + "\n").unwrap();
+    p
+}
+
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
@@ -76,8 +87,7 @@ fn a_missing_trial_file_is_an_error_naming_the_file() {
 
 #[test]
 fn a_malformed_trc_is_an_error_naming_the_line() {
-    let p = tmp("bad.trc");
-    std::fs::write(&p, "PathFileType\t4\t(X/Y/Z)\tbad.trc\nDataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\n100\t100\t1\t1\tmm\nFrame#\tTime\tA\t\t\n\t\tX1\tY1\tZ1\n1\t0.0\t1.0\tabc\t3.0\n").unwrap();
+    let p = one_marker_trc("bad.trc", "A", &["1\t0.0\t1.0\tabc\t3.0"]);
     let o = smocap(&["solve", p.to_str().unwrap()]);
     assert_clean_failure(&o, "bad.trc");
 }
@@ -86,16 +96,14 @@ fn a_malformed_trc_is_an_error_naming_the_line() {
 fn a_model_with_an_unknown_joint_type_is_an_error() {
     let p = tmp("bad_joint.xml");
     std::fs::write(&p, "<mujoco model=\"m\">\n<worldbody>\n<body name=\"a\">\n<joint name=\"j\" type=\"screw\"/>\n</body>\n</worldbody>\n</mujoco>\n").unwrap();
-    let trc = tmp("any.trc");
-    std::fs::write(&trc, "PathFileType\t4\t(X/Y/Z)\tany.trc\nDataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\n100\t100\t1\t1\tmm\nFrame#\tTime\tA\t\t\n\t\tX1\tY1\tZ1\n1\t0.0\t1.0\t2.0\t3.0\n").unwrap();
+    let trc = one_marker_trc("any.trc", "A", &["1\t0.0\t1.0\t2.0\t3.0"]);
     let o = smocap(&["solve", "--model", p.to_str().unwrap(), trc.to_str().unwrap()]);
     assert_clean_failure(&o, "screw");
 }
 
 #[test]
 fn a_marker_set_matching_no_model_marker_is_an_error_listing_both_sides() {
-    let trc = tmp("nomatch.trc");
-    std::fs::write(&trc, "PathFileType\t4\t(X/Y/Z)\tnomatch.trc\nDataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\n100\t100\t2\t1\tmm\nFrame#\tTime\tFOO\t\t\n\t\tX1\tY1\tZ1\n1\t0.0\t1.0\t2.0\t3.0\n2\t0.01\t1.0\t2.0\t3.0\n").unwrap();
+    let trc = one_marker_trc("nomatch.trc", "FOO", &["1\t0.0\t1.0\t2.0\t3.0", "2\t0.01\t1.0\t2.0\t3.0"]);
     let o = smocap(&["solve", trc.to_str().unwrap()]);
     assert_clean_failure(&o, "FOO");
     assert!(stderr(&o).contains("LASI"), "{}", stderr(&o));
@@ -107,4 +115,43 @@ fn demo_runs_on_the_embedded_default() {
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(out.contains("RMSE") && out.contains("joint angle RMSE"), "{out}");
+}
+
+#[test]
+fn a_frame_with_every_marker_missing_is_reported_and_the_rest_solved() {
+    let (trc, truth, report) = (tmp("gap.trc"), tmp("gap.json"), tmp("gap_report.json"));
+    let o = smocap(&[
+        "synth",
+        "--frames",
+        "40",
+        "--seed",
+        "6",
+        "--out",
+        trc.to_str().unwrap(),
+        "--truth",
+        truth.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // Blank every marker of frame 11 (file frame numbers start at 1).
+    let text = std::fs::read_to_string(&trc).unwrap();
+    let blanked: Vec<String> = text
+        .lines()
+        .map(|l| {
+            let cells: Vec<&str> = l.split('\t').collect();
+            if cells.first() == Some(&"11") && cells.len() > 2 {
+                let mut c: Vec<String> = cells[..2].iter().map(|s| s.to_string()).collect();
+                c.extend(std::iter::repeat_n(String::new(), cells.len() - 2));
+                c.join("\t")
+            } else {
+                l.to_string()
+            }
+        })
+        .collect();
+    std::fs::write(&trc, blanked.join("\n") + "\n").unwrap();
+    let o = smocap(&["solve", trc.to_str().unwrap(), "--threads", "1", "--report-json", report.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("frame 10"), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(v["trials"][0]["bridged_frames"], serde_json::json!([10]));
+    assert_eq!(v["trials"][0]["frames"], 40);
 }

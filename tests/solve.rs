@@ -133,7 +133,9 @@ fn cold_start_finds_a_subject_facing_backwards() {
 fn scale_symmetry_constraint_holds_in_calibration_and_in_every_frame() {
     use smocap::model::profile::Profile;
     use smocap::pipeline::context::{SHIPPED_MODEL, SHIPPED_PROFILE};
-    let text = format!("{SHIPPED_PROFILE}\n[[constraint]]\nproxies = {{ femur_r = 1.0, femur_l = -1.0 }}\nmin = -0.01\nmax = 0.01\n");
+    let text = format!(
+        "{SHIPPED_PROFILE}\n[[constraint]]\nproxies = {{ femur_r = 1.0, femur_l = -1.0 }}\nmin = -0.01\nmax = 0.01\n"
+    );
     let profile = Profile::parse(&text, std::path::Path::new("sym.toml")).unwrap();
     let model = smocap::io::mjcf::parse_mjcf(SHIPPED_MODEL, "fullbody.xml").unwrap();
     let ctx = Context::new(model, profile, "sym.toml", "test".into()).unwrap();

@@ -82,8 +82,10 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
             Ok(r) => {
                 for &f in &r.bridged {
                     eprintln!(
-                        "{name}: frame {} has fewer than {} observed markers; bridged from its neighbours",
-                        f, ctx.settings.min_markers
+                        "{name}: frame {f} (file frame {}, t = {:.3} s) has fewer than {} observed markers; bridged from its neighbours",
+                        t.frame_numbers.get(f).copied().unwrap_or(f as i64 + 1),
+                        t.times.get(f).copied().unwrap_or(f64::NAN),
+                        ctx.settings.min_markers
                     );
                 }
                 report.push(trial_report(&ctx, &r, truth.as_ref()));

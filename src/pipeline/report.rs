@@ -28,7 +28,7 @@ pub struct TrialReport {
     pub trial: String,
     /// "ok" or "failed".
     pub status: String,
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// Why the trial failed (null when it did not).
     pub error: Option<String>,
     pub frames: usize,
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -162,6 +162,7 @@ pub fn solve_trial(
     let settings = &ctx.settings;
     let eval = ctx.evaluator();
     let ny = ctx.model.ny();
+    let nq = ctx.model.nq();
     let np = ctx.proxy.np();
 
     // Tracking: scales toward the calibration, coordinates weakly toward the warm start.
@@ -191,6 +192,7 @@ pub fn solve_trial(
             .map(|&(a, b)| {
                 let mut solver = FrameSolver::new(&eval, settings.clone(), make_qp(settings.qp));
                 let mut reference = y_cal.clone();
+                let (mut y_warm, mut dphi) = (vec![0.0; ny], vec![0.0; ctx.proxy.terms.len()]);
                 let mut out = Vec::with_capacity(b - a);
                 let mut prev: Option<Vec<f64>> = None;
                 let mut prev2: Option<Vec<f64>> = None;
@@ -206,8 +208,9 @@ pub fn solve_trial(
                         (None, _, _) => neutral.clone(),
                     };
                     solver.clamp(&mut p);
-                    let y_warm = ctx.proxy.state(&p);
-                    reference[..ctx.model.nq()].copy_from_slice(&y_warm[..ctx.model.nq()]);
+                    // Pose prior toward the warm start (scales keep the calibrated reference).
+                    ctx.proxy.apply(&p, &mut y_warm, &mut dphi);
+                    reference[..nq].copy_from_slice(&y_warm[..nq]);
                     let frame = FrameProblem {
                         observed: o,
                         marker_weights: &ctx.marker_weights,

@@ -13,10 +13,10 @@
 //! when the total objective decreases. A weak prior pulls unobservable scales toward 1.
 
 use super::init::cold_start;
+use super::qp::{BoxQp, ClarabelQp, LinearConstraints, QpProblem, QpSolver};
 use super::trqp::FrameSolver;
 use crate::kinematics::assembly::FrameProblem;
 use crate::model::proxy::ProxyKind;
-use super::qp::{BoxQp, ClarabelQp, LinearConstraints, QpProblem, QpSolver};
 use crate::model::proxy::ProxyMap;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
@@ -95,10 +95,9 @@ pub fn calibrate(
         let mut schur = DMatrix::<f64>::zeros(ns, ns);
         let mut rhs = DVector::<f64>::zeros(ns);
         let mut blocks = Vec::with_capacity(frames.len());
-        for (i, &k) in scale.iter().enumerate() {
+        for i in 0..ns {
             schur[(i, i)] += prior;
             rhs[i] -= prior * (shared[i] - 1.0);
-            let _ = k;
         }
         for (obs, p) in frames.iter().zip(&poses) {
             let mut p = p.clone();
