@@ -20,28 +20,8 @@ fn markers_at(model: &smocap::model::Model, y: &[f64]) -> Vec<f64> {
 fn marker_jacobian_pose_and_scale_columns_match_central_differences() {
     for seed in 0..12 {
         let model = random_model(seed, 7);
-        let proxy = ProxyMap::new(&model, &Profile::default_for(&model)).unwrap();
-        let layout = Layout::new(&model, &proxy);
         let y = random_state(&model, 100 + seed);
-        let mut ws = cpu::Workspace::new(&model);
-        cpu::forward(&model, &y, &mut ws);
-        cpu::jacobian(&model, &layout, &mut ws);
-        let h = 1e-6;
-        for j in 0..model.ny() {
-            let mut yp = y.clone();
-            let mut ym = y.clone();
-            yp[j] += h;
-            ym[j] -= h;
-            let (xp, xm) = (markers_at(&model, &yp), markers_at(&model, &ym));
-            for r in 0..xp.len() {
-                let fd = (xp[r] - xm[r]) / (2.0 * h);
-                let an = ws.jy_t[(j, r)];
-                assert!(
-                    (fd - an).abs() <= 1e-6 * an.abs().max(1.0),
-                    "seed {seed}: J[{r}, {j}] analytic {an} vs fd {fd}"
-                );
-            }
-        }
+        assert_jacobian_matches_fd(&model, &y, &format!("random model {seed}"));
     }
 }
 
@@ -240,4 +220,66 @@ fn dense_marker_jacobian_is_jy_times_jphi() {
     // H = J_mᵀ J_m with unit weights and no tracking.
     let h = jm.transpose() * &jm;
     assert!((h - &ws.gn.h).amax() < 1e-10);
+}
+
+/// Central-difference check of `J_y` for `model` at `y`.
+fn assert_jacobian_matches_fd(model: &smocap::model::Model, y: &[f64], what: &str) {
+    let proxy = ProxyMap::new(model, &Profile::default_for(model)).unwrap();
+    let layout = Layout::new(model, &proxy);
+    let mut ws = cpu::Workspace::new(model);
+    cpu::forward(model, y, &mut ws);
+    cpu::jacobian(model, &layout, &mut ws);
+    let h = 1e-6;
+    for j in 0..model.ny() {
+        let (mut yp, mut ym) = (y.to_vec(), y.to_vec());
+        yp[j] += h;
+        ym[j] -= h;
+        let (xp, xm) = (markers_at(model, &yp), markers_at(model, &ym));
+        for r in 0..xp.len() {
+            let fd = (xp[r] - xm[r]) / (2.0 * h);
+            let an = ws.jy_t[(j, r)];
+            assert!((fd - an).abs() <= 1e-6 * an.abs().max(1.0), "{what}: J[{r}, {j}] analytic {an} vs fd {fd}");
+        }
+    }
+}
+
+#[test]
+fn jacobian_matches_finite_differences_for_every_mjcf_joint_type_and_joint_anchors() {
+    let xml = r#"<mujoco model="kinds">
+      <compiler angle="radian"/>
+      <worldbody>
+        <body name="root" pos="0.1 0.2 0.9">
+          <freejoint name="root"/>
+          <site name="r0" pos="0.1 0 0"/><site name="r1" pos="0 0.1 0"/><site name="r2" pos="0 0 0.1"/>
+          <body name="ball" pos="0 0.1 -0.1" euler="0.2 0.1 0.3">
+            <joint name="b" type="ball" pos="0 0 0.05"/>
+            <site name="b0" pos="0.05 0 -0.2"/><site name="b1" pos="0 0.04 -0.3"/>
+            <body name="hinge" pos="0 0 -0.4">
+              <joint name="h" type="hinge" axis="0.3 1 0" pos="0.01 0 0.02" ref="0.2" range="-2 2"/>
+              <site name="h0" pos="0.02 0.01 -0.25"/>
+              <body name="slide" pos="0 0 -0.3" quat="0.9 0.1 0.2 0.3">
+                <joint name="s" type="slide" axis="0 0 1"/>
+                <joint name="s2" type="hinge" axis="1 0 0"/>
+                <site name="s0" pos="0.1 0.05 0"/>
+              </body>
+            </body>
+          </body>
+        </body>
+      </worldbody>
+    </mujoco>"#;
+    let model = smocap::io::mjcf::parse_mjcf(xml, "kinds.xml").unwrap();
+    for seed in 0..4 {
+        let y = random_state(&model, 300 + seed);
+        assert_jacobian_matches_fd(&model, &y, &format!("mjcf kinds, seed {seed}"));
+    }
+}
+
+#[test]
+fn jacobian_matches_finite_differences_on_the_shipped_model() {
+    let model = smocap::io::mjcf::parse_mjcf(smocap::pipeline::context::SHIPPED_MODEL, "fullbody.xml").unwrap();
+    let mut y = random_state(&model, 77);
+    for (j, c) in model.coordinates.iter().enumerate() {
+        y[j] = y[j].clamp(c.range.0.max(-1.5), c.range.1.min(1.5));
+    }
+    assert_jacobian_matches_fd(&model, &y, "fullbody");
 }

@@ -28,6 +28,12 @@ impl Function {
     pub const IDENTITY: Function = Function::Linear { slope: 1.0, intercept: 0.0 };
 
     /// Value and derivative `(f(x), f'(x))`.
+    ///
+    /// ```
+    /// use smocap::model::Function;
+    /// let f = Function::Polynomial { coefficients: vec![1.0, 2.0, 3.0] }; // 1 + 2x + 3x²
+    /// assert_eq!(f.eval(2.0), (17.0, 14.0));
+    /// ```
     #[inline]
     pub fn eval(&self, x: f64) -> (f64, f64) {
         match self {
