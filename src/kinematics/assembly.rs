@@ -7,7 +7,10 @@
 //! ```
 //! Weights here are the weights on squared errors (`W = diag(w)`, the square of METHOD.md's
 //! square-root weights). Sparsity comes from [`Layout`]: a marker only touches the proxies on its
-//! chain, so `H` is accumulated marker by marker over small index sets.
+//! chain, so `H` is accumulated body by body over small index sets. The chain of a body is walked
+//! once for all its markers: each contribution to a Jacobian column is `a + w × x` for a point
+//! `x` on the body (`w ≠ 0` for rotations only), so the `J_m` rows of a marker are
+//! `A_s + W_s × x` plus its own offset's scale terms.
 
 use super::{cpu, Layout, Workspace};
 use crate::model::proxy::ProxyMap;
@@ -62,9 +65,9 @@ pub struct EvalWorkspace {
     /// `J_Φ` non-zeros, one per proxy-map term.
     pub dphi: Vec<f64>,
     pub gn: GaussNewton,
-    /// Scratch: a marker's compact rows of `J_y` and `J_m`, a body's `H` block (upper,
-    /// row-major) and `g` part.
-    jy_rows: Vec<f64>,
+    /// Scratch: a body's `A_s`, `W_s` (see `linearize`), a marker's compact rows of `J_m`, a
+    /// body's `H` block (upper, row-major) and `g` part.
+    aw: Vec<f64>,
     row: Vec<f64>,
     block: Vec<f64>,
     gpart: Vec<f64>,
@@ -84,7 +87,7 @@ impl EvalWorkspace {
                 marker_sq_sum: 0.0,
                 markers_used: 0,
             },
-            jy_rows: vec![0.0; 3 * model.ny()],
+            aw: vec![0.0; 6 * np],
             row: vec![0.0; 3 * np],
             block: vec![0.0; np * np],
             gpart: vec![0.0; np],
@@ -131,7 +134,7 @@ impl<'m> Evaluator<'m> {
     /// Gauss–Newton model `(H, g, E)` at `p` into `ws.gn`.
     pub fn linearize(&self, p: &[f64], frame: &FrameProblem<'_>, ws: &mut EvalWorkspace) {
         let (energy, sq, used) = self.energy(p, frame, ws);
-        let EvalWorkspace { kin, y, dphi, gn, jy_rows, row, block, gpart } = ws;
+        let EvalWorkspace { kin, y, dphi, gn, aw, row, block, gpart } = ws;
         gn.h.fill(0.0);
         gn.g.fill(0.0);
         gn.energy = energy;
@@ -152,25 +155,39 @@ impl<'m> Evaluator<'m> {
                     blk.fill(0.0);
                     gp.fill(0.0);
                     any = true;
+                    // The body's chain, once for all its markers: J_m row of slot s at a point x
+                    // on the body is A_s + W_s × x (plus the point's own offset terms).
+                    aw[..6 * ns].fill(0.0);
+                    let (a_s, w_s) = aw[..6 * ns].split_at_mut(3 * ns);
+                    cpu::chain_contributions(self.model, kin, m_body(self.model, deps), |j, a, wv| {
+                        for t in self.proxy.y_terms[j].clone() {
+                            let s = 3 * deps.slot_of_proxy[self.proxy.terms[t].proxy];
+                            let d = dphi[t];
+                            for k in 0..3 {
+                                a_s[s + k] += a[k] * d;
+                                w_s[s + k] += wv[k] * d;
+                            }
+                        }
+                    });
                 }
-                // Compact rows of J_y over this body's ys, then of J_m = J_y J_Φ over its proxies.
-                let nys = deps.ys.len();
-                let jr = &mut jy_rows[..3 * nys];
-                jr.fill(0.0);
-                cpu::marker_contributions(self.model, kin, m, |j, v| {
-                    let i = 3 * deps.y_slot[j];
-                    jr[i] += v.x;
-                    jr[i + 1] += v.y;
-                    jr[i + 2] += v.z;
-                });
+                let x = kin.marker(m);
                 let rows = &mut row[..3 * ns];
-                rows.fill(0.0);
-                for &(t, yi, slot) in &deps.terms {
-                    let d = dphi[t];
-                    rows[3 * slot] += jr[3 * yi] * d;
-                    rows[3 * slot + 1] += jr[3 * yi + 1] * d;
-                    rows[3 * slot + 2] += jr[3 * yi + 2] * d;
+                let (a_s, w_s) = aw[..6 * ns].split_at(3 * ns);
+                for s in 0..ns {
+                    let (a, wv) = (&a_s[3 * s..3 * s + 3], &w_s[3 * s..3 * s + 3]);
+                    rows[3 * s] = a[0] + wv[1] * x.z - wv[2] * x.y;
+                    rows[3 * s + 1] = a[1] + wv[2] * x.x - wv[0] * x.z;
+                    rows[3 * s + 2] = a[2] + wv[0] * x.y - wv[1] * x.x;
                 }
+                cpu::marker_offset_contributions(self.model, kin, m, |j, v| {
+                    for t in self.proxy.y_terms[j].clone() {
+                        let s = 3 * deps.slot_of_proxy[self.proxy.terms[t].proxy];
+                        let d = dphi[t];
+                        rows[s] += v.x * d;
+                        rows[s + 1] += v.y * d;
+                        rows[s + 2] += v.z * d;
+                    }
+                });
                 // H_S += w Σ_a c_a c_aᵀ (upper triangle), g_S += w Σ_a c_a r_a; rows interleaved by axis.
                 let r = [kin.markers[3 * m] - obs[0], kin.markers[3 * m + 1] - obs[1], kin.markers[3 * m + 2] - obs[2]];
                 for i in 0..ns {
@@ -223,4 +240,9 @@ impl<'m> Evaluator<'m> {
         }
         jm
     }
+}
+
+/// The body that the markers of `deps` sit on.
+fn m_body(model: &Model, deps: &crate::kinematics::layout::BodyDeps) -> usize {
+    model.markers[deps.markers[0]].body
 }

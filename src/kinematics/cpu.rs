@@ -112,47 +112,70 @@ pub fn forward(model: &Model, y: &[f64], ws: &mut Workspace) {
     }
 }
 
-/// Calls `f(j, ∂x/∂y_j)` for every contribution to the Jacobian of marker `m` (at the state
-/// of the last [`forward`] call); a `y_j` may receive several contributions, to be summed.
+/// Calls `f(j, a, w)` for every contribution `∂x/∂y_j += a + w × x` of the joints on the chain
+/// of `body` to the Jacobian of a point `x` fixed on that body (at the state of the last
+/// [`forward`] call). Rotations give `w = f'ω`, `a = −f'ω × o`; everything else `w = 0`. The
+/// point's own offset (its scale columns) is not included: see [`marker_contributions`].
 #[inline]
-pub fn marker_contributions(model: &Model, ws: &Workspace, m: usize, mut f: impl FnMut(usize, Vector3<f64>)) {
-    let mk = &model.markers[m];
-    let x = ws.marker(m);
-    for &a in model.chain(mk.body) {
-        let body = &model.bodies[a];
-        if let Some(p) = body.parent {
-            let t_p = body.joint.parent_offset.translation.vector;
+pub fn chain_contributions(
+    model: &Model,
+    ws: &Workspace,
+    body: usize,
+    mut f: impl FnMut(usize, Vector3<f64>, Vector3<f64>),
+) {
+    let zero = Vector3::zeros();
+    for &a in model.chain(body) {
+        let b = &model.bodies[a];
+        if let Some(p) = b.parent {
+            let t_p = b.joint.parent_offset.translation.vector;
             let r_p = &ws.body_rot[p];
             for k in 0..3 {
-                f(model.scale_index(p, k), r_p.column(k) * t_p[k]);
+                f(model.scale_index(p, k), r_p.column(k) * t_p[k], zero);
             }
         }
-        for k in body.joint.motions.clone() {
+        for k in b.joint.motions.clone() {
             let mo = &model.motions[k];
             let w = ws.motion_axis[k];
             if let Some(c) = mo.coordinate {
-                let d = match mo.kind {
-                    MotionKind::Rotation => w.cross(&(x - ws.motion_origin[k])) * ws.motion_der[k],
-                    MotionKind::Translation => w * (ws.motion_der[k] * ws.motion_sigma[k]),
-                };
-                f(c, d);
+                match mo.kind {
+                    MotionKind::Rotation => {
+                        let wd = w * ws.motion_der[k];
+                        f(c, -wd.cross(&ws.motion_origin[k]), wd);
+                    }
+                    MotionKind::Translation => f(c, w * (ws.motion_der[k] * ws.motion_sigma[k]), zero),
+                }
             }
-            if let (MotionKind::Translation, Some(wts), Some(p)) = (mo.kind, mo.parent_scale_weights, body.parent) {
+            if let (MotionKind::Translation, Some(wts), Some(p)) = (mo.kind, mo.parent_scale_weights, b.parent) {
                 for k2 in 0..3 {
-                    f(model.scale_index(p, k2), w * (ws.motion_val[k] * wts[k2]));
+                    f(model.scale_index(p, k2), w * (ws.motion_val[k] * wts[k2]), zero);
                 }
             }
         }
-        let t_c = body.joint.child_offset.translation.vector;
+        let t_c = b.joint.child_offset.translation.vector;
         let r_a = &ws.body_rot[a];
         for k in 0..3 {
-            f(model.scale_index(a, k), -r_a.column(k) * t_c[k]);
+            f(model.scale_index(a, k), -r_a.column(k) * t_c[k], zero);
         }
     }
+}
+
+/// Calls `f(j, v)` for the scale columns of marker `m`'s own offset: `v = R_b e_k o_k`.
+#[inline]
+pub fn marker_offset_contributions(model: &Model, ws: &Workspace, m: usize, mut f: impl FnMut(usize, Vector3<f64>)) {
+    let mk = &model.markers[m];
     let r_b = &ws.body_rot[mk.body];
     for k in 0..3 {
         f(model.scale_index(mk.body, k), r_b.column(k) * mk.offset[k]);
     }
+}
+
+/// Calls `f(j, ∂x/∂y_j)` for every contribution to the Jacobian of marker `m` (at the state
+/// of the last [`forward`] call); a `y_j` may receive several contributions, to be summed.
+#[inline]
+pub fn marker_contributions(model: &Model, ws: &Workspace, m: usize, mut f: impl FnMut(usize, Vector3<f64>)) {
+    let x = ws.marker(m);
+    chain_contributions(model, ws, model.markers[m].body, |j, a, w| f(j, a + w.cross(&x)));
+    marker_offset_contributions(model, ws, m, f);
 }
 
 /// Fills `ws.jy_t` with `J_yᵀ` at the state of the last [`forward`] call (entries that cannot

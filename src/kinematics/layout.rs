@@ -13,19 +13,14 @@ pub struct BodyDeps {
     pub ys: Vec<usize>,
     /// Distinct proxies that can move them (sorted): the index set `S` of their rows of `J_m`.
     pub proxies: Vec<usize>,
-    /// Proxy-map terms acting on `ys`, as `(term, position in ys, slot in proxies)`.
-    pub terms: Vec<(usize, usize, usize)>,
-    /// For every index of `y`, its position in `ys` (entries not in `ys` are never read).
-    pub y_slot: Vec<usize>,
+    /// For every proxy, its slot in `proxies` (entries not in `proxies` are never read).
+    pub slot_of_proxy: Vec<usize>,
 }
 
 /// Per-body dependency lists, for bodies that carry markers.
 #[derive(Clone, Debug)]
 pub struct Layout {
     pub bodies: Vec<BodyDeps>,
-    /// Largest `proxies.len()` and `ys.len()` over bodies (scratch sizes).
-    pub max_proxies: usize,
-    pub max_ys: usize,
 }
 
 impl Layout {
@@ -47,22 +42,16 @@ impl Layout {
             }
             ys.sort_unstable();
             ys.dedup();
-            let term_ids: Vec<usize> = ys.iter().flat_map(|&j| proxy.y_terms[j].clone()).collect();
-            let mut proxies: Vec<usize> = term_ids.iter().map(|&t| proxy.terms[t].proxy).collect();
+            let mut proxies: Vec<usize> =
+                ys.iter().flat_map(|&j| proxy.y_terms[j].clone()).map(|t| proxy.terms[t].proxy).collect();
             proxies.sort_unstable();
             proxies.dedup();
-            let mut y_slot = vec![usize::MAX; model.ny()];
-            for (i, &j) in ys.iter().enumerate() {
-                y_slot[j] = i;
+            let mut slot_of_proxy = vec![usize::MAX; proxy.np()];
+            for (slot, &k) in proxies.iter().enumerate() {
+                slot_of_proxy[k] = slot;
             }
-            let terms = term_ids
-                .iter()
-                .map(|&t| (t, y_slot[proxy.terms[t].y_index], proxies.partition_point(|&k| k < proxy.terms[t].proxy)))
-                .collect();
-            bodies.push(BodyDeps { markers, ys, proxies, terms, y_slot });
+            bodies.push(BodyDeps { markers, ys, proxies, slot_of_proxy });
         }
-        let max_proxies = bodies.iter().map(|b| b.proxies.len()).max().unwrap_or(0);
-        let max_ys = bodies.iter().map(|b| b.ys.len()).max().unwrap_or(0);
-        Layout { bodies, max_proxies, max_ys }
+        Layout { bodies }
     }
 }
