@@ -155,3 +155,17 @@ fn a_frame_with_every_marker_missing_is_reported_and_the_rest_solved() {
     assert_eq!(v["trials"][0]["bridged_frames"], serde_json::json!([10]));
     assert_eq!(v["trials"][0]["frames"], 40);
 }
+
+#[test]
+fn markers_summarises_a_file_with_its_gaps_as_json() {
+    let p = one_marker_trc("summary.trc", "A", &["1\t0.0\t1.0\t2.0\t3.0", "2\t0.01\t\t\t", "3\t0.02\t1.0\t2.0\t3.0"]);
+    let o = smocap(&["markers", p.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["frames"], 3);
+    assert_eq!(v["rate_hz"], 100.0);
+    assert_eq!(v["markers"][0]["label"], "A");
+    assert_eq!(v["markers"][0]["gaps"], 1);
+    let o = smocap(&["markers", "trial.xyz"]);
+    assert_clean_failure(&o, "unsupported marker file type");
+}

@@ -4,6 +4,7 @@
 //! 3 the command ran but some trials failed (see the report).
 
 mod demo;
+mod markers;
 mod solve;
 mod synth;
 
@@ -28,6 +29,8 @@ pub enum Command {
     Synth(synth::SynthArgs),
     /// Calibrate a subject and solve its trials jointly for scale and pose.
     Solve(solve::SolveArgs),
+    /// What a marker file holds: frames, rate, units, labels, gaps per label, time span.
+    Markers(markers::MarkersArgs),
 }
 
 /// Runs the command line; errors are printed with their causes.
@@ -37,6 +40,7 @@ pub fn main() -> ExitCode {
         Command::Demo(a) => demo::run(a),
         Command::Synth(a) => synth::run(a),
         Command::Solve(a) => solve::run(a),
+        Command::Markers(a) => markers::run(a),
     };
     match result {
         Ok(code) => ExitCode::from(code),

@@ -1,6 +1,5 @@
 //! `smocap solve`: calibrate a subject, then solve its trials.
 
-use crate::io::trc;
 use crate::pipeline::report::{trial_report, Report};
 use crate::pipeline::{calibrate_subject, solve_trial};
 use crate::solve::QpBackend;
@@ -54,14 +53,14 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         None => None,
     };
     let static_trial = match &a.static_trial {
-        Some(p) => Some(trc::read_trc(p)?),
+        Some(p) => Some(crate::io::read_markers(p)?),
         None => None,
     };
     let mut report = Report::new(&ctx, threads);
     let mut loaded = Vec::new();
     for p in &a.trials {
         let name = p.display().to_string();
-        match trc::read_trc(p) {
+        match crate::io::read_markers(p) {
             Ok(t) => loaded.push((name, t)),
             Err(e) => report.push(Report::failed(&name, e.to_string())),
         }

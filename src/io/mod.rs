@@ -5,3 +5,30 @@ pub mod mjcf;
 pub mod trc;
 
 pub use markers::MarkerTrial;
+
+use std::path::Path;
+
+/// Errors reading a marker file of any supported format.
+#[derive(Debug, thiserror::Error)]
+pub enum MarkerFileError {
+    #[error(transparent)]
+    Trc(#[from] trc::TrcError),
+    #[error("{path}: unsupported marker file type '{extension}' (supported: {supported})")]
+    Unsupported { path: String, extension: String, supported: &'static str },
+}
+
+/// Marker file formats understood by [`read_markers`], by extension.
+pub const MARKER_FORMATS: &str = "trc";
+
+/// Reads a marker trial, choosing the reader by the file's extension (case-insensitive).
+pub fn read_markers(path: &Path) -> Result<MarkerTrial, MarkerFileError> {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    match ext.as_str() {
+        "trc" => Ok(trc::read_trc(path)?),
+        _ => Err(MarkerFileError::Unsupported {
+            path: path.display().to_string(),
+            extension: ext,
+            supported: MARKER_FORMATS,
+        }),
+    }
+}
