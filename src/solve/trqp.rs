@@ -186,7 +186,8 @@ impl<'e> FrameSolver<'e> {
                 let rel = (e0 - e1) / e0.max(f64::MIN_POSITIVE);
                 // The model's error over the step, |Δf_act − Δf_pred|, estimates what another
                 // iteration could still gain when the step was not cut by the damping or the box.
-                let model_error = (act + damp_pen - pred - damp_pen).abs() / e1.max(f64::MIN_POSITIVE);
+                // (Both include the damping penalty, which cancels: (e0 − e1) − (pred + ½ΔpᵀW_dampΔp).)
+                let model_error = (act - pred).abs() / e1.max(f64::MIN_POSITIVE);
                 let exact_model =
                     s.model_error_tol > 0.0 && model_error < s.model_error_tol && lambda <= s.damping_init;
                 if stats.rmse_m < s.residual_tol_m || rel < s.rel_decrease_tol || step_max < s.step_tol || exact_model {
