@@ -107,13 +107,26 @@ pub fn synthesize(model: &Model, proxy: &ProxyMap, opt: &SynthOptions) -> Synthe
                 fixed[k] = Some(rng.random_range(1.0 - opt.scale_spread..=1.0 + opt.scale_spread).clamp(lo, hi));
                 (0.0, 0.0)
             }
-            _ if lo.is_finite() && hi.is_finite() => {
-                // Stay inside the central part of the range.
-                let c = default[k].clamp(lo + 0.3 * (hi - lo), hi - 0.3 * (hi - lo));
-                (c, 0.25 * (hi - lo).min(PI))
+            kind => {
+                // Unbounded motion amplitude, and the largest span the range may use (rad or m).
+                let (free_amp, cap) = if kind == ProxyKind::Rotation { (0.15, PI) } else { (0.03, 0.2) };
+                match (lo.is_finite(), hi.is_finite()) {
+                    // Stay inside the central part of the range.
+                    (true, true) => {
+                        (default[k].clamp(lo + 0.3 * (hi - lo), hi - 0.3 * (hi - lo)), 0.25 * (hi - lo).min(cap))
+                    }
+                    // One finite end: keep the wave on its side of it.
+                    (true, false) => {
+                        let c = default[k].max(lo + 2.0 * free_amp);
+                        (c, free_amp.min(0.8 * (c - lo)))
+                    }
+                    (false, true) => {
+                        let c = default[k].min(hi - 2.0 * free_amp);
+                        (c, free_amp.min(0.8 * (hi - c)))
+                    }
+                    (false, false) => (default[k], free_amp),
+                }
             }
-            ProxyKind::Rotation => (default[k], 0.15),
-            ProxyKind::Translation => (default[k], 0.03),
         };
         waves.push(Wave { center, amp, parts });
     }
@@ -154,7 +167,8 @@ pub fn synthesize(model: &Model, proxy: &ProxyMap, opt: &SynthOptions) -> Synthe
         let p: Vec<f64> = (0..np).map(|k| fixed[k].unwrap_or_else(|| waves[k].at(t))).collect();
         let mut p = p;
         if let Some(k) = walk {
-            p[k] = default[k] + opt.speed_m_s * t + 0.02 * waves[k].at(t);
+            let (lo, hi) = proxy.proxies[k].range;
+            p[k] = (default[k] + opt.speed_m_s * t + 0.02 * waves[k].at(t)).clamp(lo, hi);
         }
         proxy.apply(&p, &mut y, &mut dphi);
         cpu::forward(&moved, &y, &mut ws);

@@ -164,3 +164,29 @@ fn a_constraint_naming_an_unknown_proxy_is_an_error_listing_the_proxies() {
     let err = ProxyMap::new(&ctx.model, &profile).unwrap_err().to_string();
     assert!(err.contains("femur_x") && err.contains("femur_r"), "{err}");
 }
+
+#[test]
+fn a_frame_far_from_its_warm_start_is_not_declared_converged_by_a_box_limited_step() {
+    // The subject moved 1 m further than the warm start says (a long gap): the translation step
+    // is cut by the 0.25 m step box while the model is exact along it.
+    let ctx = Context::shipped().unwrap();
+    let s = synthesize(
+        &ctx.model,
+        &ctx.proxy,
+        &SynthOptions { frames: 3, seed: 5, noise_m: 0.0, ..SynthOptions::default() },
+    );
+    let eval = ctx.evaluator();
+    let stride = 3 * ctx.model.markers.len();
+    let zeros = vec![0.0; ctx.model.ny()];
+    let frame = FrameProblem {
+        observed: &s.trial.positions[..stride],
+        marker_weights: &ctx.marker_weights,
+        tracking_ref: &zeros,
+        tracking_weights: &zeros,
+    };
+    let mut solver = FrameSolver::new(&eval, ctx.settings.clone(), make_qp(QpBackend::Boxqp));
+    let mut p = s.truth.proxies[0].clone();
+    p[ctx.proxy.proxy_index("pelvis_tx").unwrap()] -= 1.0;
+    let st = solver.solve(&frame, &mut p);
+    assert!(st.rmse_m < 1e-3, "RMSE {} m, status {:?}, {} iterations", st.rmse_m, st.status, st.iterations);
+}

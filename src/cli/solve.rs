@@ -45,6 +45,11 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         }
     }
     let threads = a.threads.unwrap_or_else(super::default_threads).max(1);
+    anyhow::ensure!(
+        a.truth.is_none() || a.trials.len() == 1,
+        "--truth describes one trial, but {} trials were given",
+        a.trials.len()
+    );
     let truth: Option<Truth> = match &a.truth {
         Some(p) => Some(
             serde_json::from_str(&std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?)

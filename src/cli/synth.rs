@@ -63,6 +63,10 @@ impl SynthArgs {
 pub fn run(a: SynthArgs) -> anyhow::Result<u8> {
     anyhow::ensure!((0.0..1.0).contains(&a.dropout), "--dropout must be in [0, 1), got {}", a.dropout);
     anyhow::ensure!(a.frames > 0 && a.rate > 0.0, "--frames and --rate must be positive");
+    anyhow::ensure!((0.0..0.5).contains(&a.scale_spread), "--scale-spread must be in [0, 0.5), got {}", a.scale_spread);
+    for (flag, v) in [("--noise-mm", a.noise_mm), ("--misplace-mm", a.misplace_mm), ("--drift-mm", a.drift_mm)] {
+        anyhow::ensure!(v.is_finite() && v >= 0.0, "{flag} must be finite and ≥ 0, got {v}");
+    }
     let ctx = super::load_context(a.model.as_deref(), a.profile.as_deref())?;
     let s = synthesize(&ctx.model, &ctx.proxy, &a.options());
     trc::write_trc(&a.out, &s.trial, "mm").with_context(|| format!("writing {}", a.out.display()))?;

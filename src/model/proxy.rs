@@ -57,6 +57,15 @@ pub enum ProxyError {
         "coupled coordinate '{dependent}' depends on '{independent}', which is not driven by a single identity proxy"
     )]
     CouplingSource { dependent: String, independent: String },
+    #[error("{what} '{name}' has an invalid range [{lo}, {hi}] (need lo ≤ hi, no NaN)")]
+    BadRange { what: &'static str, name: String, lo: f64, hi: f64 },
+}
+
+fn check_range(what: &'static str, name: &str, lo: f64, hi: f64) -> Result<(), ProxyError> {
+    if lo.is_nan() || hi.is_nan() || lo > hi {
+        return Err(ProxyError::BadRange { what, name: name.to_string(), lo, hi });
+    }
+    Ok(())
 }
 
 /// A resolved linear inequality `lo ≤ Σ coef·p_k ≤ hi` on proxies.
@@ -127,6 +136,7 @@ impl ProxyMap {
             } else {
                 ProxyKind::Rotation
             };
+            check_range("coupling", &c.proxy, c.range[0], c.range[1])?;
             proxies.push(Proxy { name: c.proxy.clone(), kind, range: (c.range[0], c.range[1]), default: 0.0 });
             for (name, coefs) in c.coordinates.iter().zip(&c.coefficients) {
                 let j = coord(name)?;
@@ -139,6 +149,9 @@ impl ProxyMap {
             }
         }
         for c in &model.couplings {
+            if driven[c.dependent] {
+                return Err(ProxyError::DrivenTwice(model.coordinates[c.dependent].name.clone()));
+            }
             driven[c.dependent] = true;
         }
         // Remaining free coordinates: identity proxies (locked ones stay fixed at their default).
@@ -168,6 +181,7 @@ impl ProxyMap {
         // Scale groups.
         let mut scaled = vec![false; model.nb()];
         for g in &profile.scale_groups {
+            check_range("scale group", &g.name, g.range[0], g.range[1])?;
             let bodies = g
                 .bodies
                 .iter()
@@ -228,6 +242,11 @@ impl ProxyMap {
                 coefficients.push((k, coef));
             }
             let (lo, hi) = (c.min.unwrap_or(f64::NEG_INFINITY), c.max.unwrap_or(f64::INFINITY));
+            let name = c.proxies.keys().cloned().collect::<Vec<_>>().join(" + ");
+            check_range("constraint on", &name, lo, hi)?;
+            if coefficients.iter().any(|(_, v)| !v.is_finite()) {
+                return Err(ProxyError::BadRange { what: "constraint coefficients of", name, lo, hi });
+            }
             constraints.push(ProxyConstraint { coefficients, lo, hi });
         }
         Ok(ProxyMap { proxies, offsets, terms, y_terms, constraints })

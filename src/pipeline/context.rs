@@ -55,6 +55,20 @@ impl Context {
             .map_err(|message| ContextError::Settings { path: profile_name.into(), message })?;
         settings.qp = crate::solve::backend_for(settings.qp, &proxy);
         let valid = || model.markers.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join(", ");
+        for (name, &w) in &profile.markers.weights {
+            if !w.is_finite() || w < 0.0 {
+                return Err(ContextError::Settings {
+                    path: profile_name.into(),
+                    message: format!("marker weight {name} = {w}: weights must be finite and ≥ 0"),
+                });
+            }
+        }
+        if let Some(w) = profile.markers.default_weight.filter(|w| !w.is_finite() || *w < 0.0) {
+            return Err(ContextError::Settings {
+                path: profile_name.into(),
+                message: format!("default_weight = {w}: weights must be finite and ≥ 0"),
+            });
+        }
         for name in profile.markers.weights.keys().chain(&profile.markers.exclude) {
             if model.marker_index(name).is_none() {
                 return Err(ContextError::UnknownMarker {

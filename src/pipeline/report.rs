@@ -158,9 +158,14 @@ pub fn trial_report(ctx: &Context, r: &TrialResult, truth: Option<&Truth>) -> Tr
     let ms: Vec<f64> = solved.iter().map(|&f| r.frame_seconds[f] * 1e3).collect();
     let its: Vec<f64> = solved.iter().map(|&f| r.stats[f].iterations as f64).collect();
     let scale_k: Vec<usize> = (0..ctx.proxy.np()).filter(|&k| ctx.proxy.proxies[k].kind == ProxyKind::Scale).collect();
-    let mean_p: Vec<f64> = (0..ctx.proxy.np())
-        .map(|k| solved.iter().map(|&f| r.proxies[f][k]).sum::<f64>() / solved.len().max(1) as f64)
-        .collect();
+    // Per-trial morphology: the mean over solved frames (the calibration when none was solved).
+    let mean_p: Vec<f64> = if solved.is_empty() {
+        r.calibration.proxies.clone()
+    } else {
+        (0..ctx.proxy.np())
+            .map(|k| solved.iter().map(|&f| r.proxies[f][k]).sum::<f64>() / solved.len() as f64)
+            .collect()
+    };
     let y_mean = ctx.proxy.state(&mean_p);
     let scale = ctx
         .model
@@ -215,8 +220,10 @@ fn errors_against(
         .filter_map(|(j, c)| t.coordinate_names.iter().position(|n| n == &c.name).map(|tj| (j, tj)))
         .collect();
     let mut errs = Vec::new();
-    for (f, p) in r.proxies.iter().enumerate().take(t.coordinates.len()) {
-        let y = ctx.proxy.state(p);
+    // Over solved frames, like every other statistic of the report (bridged frames are interpolated).
+    for f in (0..r.proxies.len().min(t.coordinates.len())).filter(|&f| r.stats[f].status != FrameStatus::TooFewMarkers)
+    {
+        let y = ctx.proxy.state(&r.proxies[f]);
         for &(j, tj) in &moved {
             // A rotation off by whole turns is the same pose.
             errs.push(crate::solve::init::wrap_angle(y[j] - t.coordinates[f][tj]).to_degrees().abs());

@@ -69,13 +69,14 @@ pub fn observations(trial: &MarkerTrial, map: &[Option<usize>]) -> Vec<f64> {
     out
 }
 
-fn observed_count(obs: &[f64]) -> usize {
-    obs.chunks_exact(3).filter(|c| !c[0].is_nan() && !c[1].is_nan() && !c[2].is_nan()).count()
+/// Markers observed in a frame that the solver uses (weight > 0).
+fn observed_count(obs: &[f64], weights: &[f64]) -> usize {
+    obs.chunks_exact(3).zip(weights).filter(|(c, &w)| w > 0.0 && c.iter().all(|v| !v.is_nan())).count()
 }
 
 /// Up to `k` frames spread evenly over those with the most observed markers.
-fn calibration_frames(obs: &[f64], stride: usize, k: usize, min: usize) -> Vec<usize> {
-    let counts: Vec<usize> = obs.chunks(stride).map(observed_count).collect();
+fn calibration_frames(obs: &[f64], weights: &[f64], stride: usize, k: usize, min: usize) -> Vec<usize> {
+    let counts: Vec<usize> = obs.chunks(stride).map(|o| observed_count(o, weights)).collect();
     let best = counts.iter().copied().max().unwrap_or(0);
     let good: Vec<usize> = (0..counts.len()).filter(|&f| counts[f] >= min && counts[f] + 2 >= best).collect();
     if good.is_empty() || k == 0 {
@@ -109,13 +110,14 @@ pub fn calibrate_subject(ctx: &Context, trials: &[(&str, &MarkerTrial)]) -> Resu
             return Err(no_match(ctx, name, t));
         }
         let o = observations(t, &map);
-        let chosen = calibration_frames(&o, stride, per_trial, settings.min_markers);
+        let chosen = calibration_frames(&o, &ctx.marker_weights, stride, per_trial, settings.min_markers);
         let Some(&last) = chosen.last() else { continue };
         // Track from the first frame to the last chosen one so that every chosen frame starts
         // from a pose continuous with the motion (a cold start far into a motion can land in a
         // wrong local minimum).
-        let first =
-            (0..=last).find(|&f| observed_count(&o[f * stride..(f + 1) * stride]) >= settings.min_markers).unwrap_or(0);
+        let first = (0..=last)
+            .find(|&f| observed_count(&o[f * stride..(f + 1) * stride], &ctx.marker_weights) >= settings.min_markers)
+            .unwrap_or(0);
         let slices: Vec<&[f64]> = (first..=last).map(|f| &o[f * stride..(f + 1) * stride]).collect();
         let tracked = track(&mut solver, &slices, &template, &p0);
         for f in chosen {

@@ -72,6 +72,7 @@ pub fn calibrate(
     let total = |solver: &mut FrameSolver<'_>, poses: &[Vec<f64>], shared: &[f64]| -> (f64, f64) {
         let mut e = 0.0;
         let mut rmse = 0.0;
+        let mut counted = 0;
         for (obs, p) in frames.iter().zip(poses) {
             let mut p = p.clone();
             for (i, &k) in scale.iter().enumerate() {
@@ -80,10 +81,13 @@ pub fn calibrate(
             let fp = FrameProblem { observed: obs, ..*frame_template };
             let (ek, sq, used) = eval.energy(&p, &fp, &mut solver.ws);
             e += ek;
-            rmse += if used > 0 { (sq / used as f64).sqrt() } else { 0.0 };
+            if used > 0 {
+                rmse += (sq / used as f64).sqrt();
+                counted += 1;
+            }
         }
         e += 0.5 * prior * shared.iter().map(|v| (v - 1.0).powi(2)).sum::<f64>();
-        (e, rmse / frames.len().max(1) as f64)
+        (e, if counted > 0 { rmse / counted as f64 } else { f64::NAN })
     };
     let (mut energy, mut rmse) = total(solver, &poses, &shared);
     let mut lambda = 1e-4;
@@ -115,12 +119,19 @@ pub fn calibrate(
             let c = gn.h.select_rows(&scale).select_columns(&scale);
             let gq = gn.g.select_rows(&pose);
             let gs = gn.g.select_rows(&scale);
-            let Some(chol) = a.cholesky() else { continue };
+            // A frame whose pose block cannot be factored keeps its pose this iteration and
+            // contributes its scale block alone.
+            let Some(chol) = a.cholesky() else {
+                schur += c;
+                rhs -= gs;
+                blocks.push(None);
+                continue;
+            };
             let ainv_b = chol.solve(&b);
             let ainv_g = chol.solve(&gq);
             schur += c - b.transpose() * &ainv_b;
             rhs -= gs - b.transpose() * &ainv_g;
-            blocks.push((ainv_b, ainv_g));
+            blocks.push(Some((ainv_b, ainv_g)));
         }
         for d in 0..ns {
             schur[(d, d)] += lambda * schur[(d, d)].max(s.damping_floor);
@@ -152,7 +163,8 @@ pub fn calibrate(
             new_shared[i] = (shared[i] + ds[i]).clamp(lo[k], hi[k]);
         }
         let mut new_poses = poses.clone();
-        for (p, (ainv_b, ainv_g)) in new_poses.iter_mut().zip(&blocks) {
+        for (p, block) in new_poses.iter_mut().zip(&blocks) {
+            let Some((ainv_b, ainv_g)) = block else { continue };
             let dq = -(ainv_g + ainv_b * &ds);
             for (i, &k) in pose.iter().enumerate() {
                 p[k] = (p[k] + dq[i]).clamp(lo[k], hi[k]);

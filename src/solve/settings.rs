@@ -70,7 +70,8 @@ pub struct SolverSettings {
     pub min_markers: usize,
     pub warm_start: WarmStart,
     pub qp: QpBackend,
-    /// Frames used by calibration (static or motion). Default 20.
+    /// Frames used by calibration (static or motion); 0 uses every frame with enough markers.
+    /// Default 20.
     pub calibration_frames: usize,
     /// Weight of the prior pulling scale factors toward 1 during calibration. Default 1e-6.
     pub calibration_scale_prior: f64,

@@ -5,9 +5,10 @@
 //! Δf_pred = −gᵀΔp* − ½ Δp*ᵀ H Δp*,   Δf_act = Ẽ(p) − [Ẽ(p+Δp*) + ½ Δp*ᵀ W_damp Δp*]
 //! ρ = Δf_act / (Δf_pred + ε_ρ);  accept iff Δf_act > 0
 //! ```
-//! `W_damp = λ·diag(max(H_kk, floor))` (Marquardt scaling). ρ > 0.75 lowers λ threefold, ρ < 0.25
-//! doubles it; a rejected step quadruples λ and halves the step box. The bounds are the step box
-//! intersected with the proxy ranges.
+//! `W_damp = λ·diag(max(H_kk, floor))` (Marquardt scaling). ρ > 0.75 lowers λ threefold (and
+//! regrows a halved step box), ρ < 0.25 doubles it; a rejected step quadruples λ and halves the
+//! step box. The bounds are the step box intersected with the proxy ranges. Convergence tests
+//! (relative decrease, step size, model error) are not trusted after a step the box cut.
 
 use super::qp::{LinearConstraints, QpProblem, QpSolver};
 use super::settings::SolverSettings;
@@ -28,6 +29,8 @@ pub enum FrameStatus {
     TooFewMarkers,
     /// The QP failed; the best accepted iterate is returned.
     QpFailed,
+    /// Every step was rejected up to the largest damping; the best accepted iterate is returned.
+    Stalled,
 }
 
 /// Statistics of one frame's solve.
@@ -138,6 +141,7 @@ impl<'e> FrameSolver<'e> {
         while stats.iterations < s.max_iterations {
             stats.iterations += 1;
             let gn = &self.ws.gn;
+            let shrink_used = shrink;
             self.h.copy_from(&gn.h);
             for k in 0..np {
                 let d = lambda * gn.h[(k, k)].max(s.damping_floor);
@@ -180,24 +184,36 @@ impl<'e> FrameSolver<'e> {
                 stats.markers_used = used;
                 if rho > 0.75 {
                     lambda = (lambda / 3.0).max(s.damping_min);
+                    shrink = (shrink * 2.0).min(1.0);
                 } else if rho < 0.25 {
                     lambda = (lambda * 2.0).min(s.damping_max);
                 }
+                // A step that the step box cut says nothing about convergence: the optimum may lie
+                // further out (a subject that moved far during a gap), so only the residual test
+                // may stop then.
+                let box_cut = (0..np).any(|k| {
+                    let b = self.step_box[k] * shrink_used * self.step_multiplier;
+                    self.free[k] && self.dp[k].abs() >= b * (1.0 - 1e-9)
+                });
                 let rel = (e0 - e1) / e0.max(f64::MIN_POSITIVE);
                 // The model's error over the step, |Δf_act − Δf_pred|, estimates what another
-                // iteration could still gain when the step was not cut by the damping or the box.
-                // (Both include the damping penalty, which cancels: (e0 − e1) − (pred + ½ΔpᵀW_dampΔp).)
+                // iteration could still gain (both include the damping penalty, which cancels).
                 let model_error = (act - pred).abs() / e1.max(f64::MIN_POSITIVE);
                 let exact_model =
                     s.model_error_tol > 0.0 && model_error < s.model_error_tol && lambda <= s.damping_init;
-                if stats.rmse_m < s.residual_tol_m || rel < s.rel_decrease_tol || step_max < s.step_tol || exact_model {
+                let converged = !box_cut && (rel < s.rel_decrease_tol || step_max < s.step_tol || exact_model);
+                if stats.rmse_m < s.residual_tol_m || converged {
                     stats.status = FrameStatus::Converged;
                     break;
                 }
                 self.eval.linearize(p, frame, &mut self.ws);
             } else {
-                if step_max < s.step_tol || lambda >= s.damping_max {
+                if step_max < s.step_tol {
                     stats.status = FrameStatus::Converged;
+                    break;
+                }
+                if lambda >= s.damping_max {
+                    stats.status = FrameStatus::Stalled;
                     break;
                 }
                 lambda = (lambda * 4.0).min(s.damping_max);
