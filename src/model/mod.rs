@@ -261,10 +261,9 @@ impl Model {
         Ok(self)
     }
 
-    /// Restores derived data after deserialisation.
-    pub fn finish_deserialize(mut self) -> Model {
-        self.rebuild_topology();
-        self
+    /// Validates a deserialised model and restores its derived data (as [`Model::new`]).
+    pub fn finish_deserialize(self) -> Result<Model, ModelError> {
+        Model::new(self.name, self.bodies, self.motions, self.coordinates, self.markers, self.couplings)
     }
 }
 
