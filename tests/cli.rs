@@ -169,3 +169,30 @@ fn markers_summarises_a_file_with_its_gaps_as_json() {
     let o = smocap(&["markers", "trial.xyz"]);
     assert_clean_failure(&o, "unsupported marker file type");
 }
+
+#[test]
+fn solves_an_opensim_model_with_a_marker_set_and_a_static_trial() {
+    let d = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/datasets/gait2354_subject01");
+    if !d.exists() {
+        eprintln!("skipped: {} is absent", d.display());
+        return;
+    }
+    let report = tmp("gait2354.json");
+    let path = |f: &str| d.join(f).to_str().unwrap().to_string();
+    let o = smocap(&[
+        "solve",
+        "--model",
+        &path("gait2354_simbody.osim"),
+        "--markerset",
+        &path("gait2354_Scale_MarkerSet.xml"),
+        "--static",
+        &path("subject01_static.trc"),
+        &path("subject01_walk1.trc"),
+        "--report-json",
+        report.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(v["trials"][0]["frames"], 151);
+    assert!(v["trials"][0]["marker_rmse_mm"]["p50"].as_f64().unwrap() < 60.0);
+}

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct MarkersArgs {
-    /// Marker file (TRC).
+    /// Marker file (TRC or C3D).
     pub file: PathBuf,
     /// Print JSON instead of a table.
     #[arg(long)]

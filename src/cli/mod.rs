@@ -61,6 +61,15 @@ pub(crate) fn load_context(
     model: Option<&std::path::Path>,
     profile: Option<&std::path::Path>,
 ) -> anyhow::Result<crate::pipeline::Context> {
+    load_context_with_markers(model, None, profile)
+}
+
+/// As [`load_context`], attaching an OpenSim marker set file to the model when given.
+pub(crate) fn load_context_with_markers(
+    model: Option<&std::path::Path>,
+    marker_set: Option<&std::path::Path>,
+    profile: Option<&std::path::Path>,
+) -> anyhow::Result<crate::pipeline::Context> {
     use crate::pipeline::Context;
     Ok(match model {
         None if profile.is_none() => Context::shipped()?,
@@ -71,7 +80,7 @@ pub(crate) fn load_context(
             Context::new(m, prof, &path.display().to_string(), "shipped:models/fullbody.xml".into())?
         }
         Some(m) => {
-            let ctx = Context::from_files(m, profile)?;
+            let ctx = Context::from_files_with_markers(m, marker_set, profile)?;
             for w in &ctx.warnings {
                 eprintln!("warning: {w}");
             }

@@ -10,16 +10,19 @@ use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct SolveArgs {
-    /// Model (MJCF); the shipped full-body model by default.
+    /// Model: OpenSim `.osim` or MJCF; the shipped full-body model by default.
     #[arg(long)]
     pub model: Option<PathBuf>,
+    /// OpenSim marker set file (`<MarkerSet>`) attached to the model.
+    #[arg(long)]
+    pub markerset: Option<PathBuf>,
     /// Solver profile (TOML); the model's default profile when absent.
     #[arg(long)]
     pub profile: Option<PathBuf>,
     /// Static calibration trial; without one, frames of the motion trials are used.
     #[arg(long = "static")]
     pub static_trial: Option<PathBuf>,
-    /// Motion trials (TRC).
+    /// Motion trials (TRC or C3D).
     #[arg(required = true)]
     pub trials: Vec<PathBuf>,
     /// Truth JSON from `smocap synth`, for pose and scale errors (single trial).
@@ -37,7 +40,8 @@ pub struct SolveArgs {
 }
 
 pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
-    let mut ctx = super::load_context(a.model.as_deref(), a.profile.as_deref())?;
+    anyhow::ensure!(a.markerset.is_none() || a.model.is_some(), "--markerset needs --model");
+    let mut ctx = super::load_context_with_markers(a.model.as_deref(), a.markerset.as_deref(), a.profile.as_deref())?;
     if let Some(qp) = a.qp {
         ctx.settings.qp = crate::solve::backend_for(qp, &ctx.proxy);
         if ctx.settings.qp != qp {

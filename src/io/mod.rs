@@ -1,7 +1,11 @@
-//! Reading and writing the files smocap meets: marker trials (TRC), models (MJCF).
+//! Reading and writing the files smocap meets: marker trials (TRC), models (MJCF, OpenSim
+//! `.osim` and marker sets), OpenSim tables (`.sto`/`.mot`).
 
+pub mod c3d;
 pub mod markers;
 pub mod mjcf;
+pub mod osim;
+pub mod sto;
 pub mod trc;
 
 pub use markers::MarkerTrial;
@@ -13,18 +17,21 @@ use std::path::Path;
 pub enum MarkerFileError {
     #[error(transparent)]
     Trc(#[from] trc::TrcError),
+    #[error(transparent)]
+    C3d(#[from] c3d::C3dError),
     #[error("{path}: unsupported marker file type '{extension}' (supported: {supported})")]
     Unsupported { path: String, extension: String, supported: &'static str },
 }
 
 /// Marker file formats understood by [`read_markers`], by extension.
-pub const MARKER_FORMATS: &str = "trc";
+pub const MARKER_FORMATS: &str = "trc, c3d";
 
 /// Reads a marker trial, choosing the reader by the file's extension (case-insensitive).
 pub fn read_markers(path: &Path) -> Result<MarkerTrial, MarkerFileError> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     match ext.as_str() {
         "trc" => Ok(trc::read_trc(path)?),
+        "c3d" => Ok(c3d::read_c3d(path)?),
         _ => Err(MarkerFileError::Unsupported {
             path: path.display().to_string(),
             extension: ext,

@@ -18,6 +18,8 @@ pub enum ContextError {
     #[error(transparent)]
     Mjcf(#[from] MjcfError),
     #[error(transparent)]
+    Osim(#[from] crate::io::osim::OsimError),
+    #[error(transparent)]
     Profile(#[from] ProfileError),
     #[error("profile does not fit the model: {0}")]
     Proxy(#[from] ProxyError),
@@ -102,7 +104,25 @@ impl Context {
     /// A model file (MJCF) with an optional profile file (default: every coordinate free,
     /// every body its own uniform scale).
     pub fn from_files(model_path: &Path, profile_path: Option<&Path>) -> Result<Context, ContextError> {
-        let (model, warnings) = mjcf::read_mjcf(model_path)?;
+        Context::from_files_with_markers(model_path, None, profile_path)
+    }
+
+    /// A model file (`.osim` for OpenSim, anything else MJCF), optionally with an OpenSim marker
+    /// set file attached, and an optional profile file.
+    pub fn from_files_with_markers(
+        model_path: &Path,
+        marker_set: Option<&Path>,
+        profile_path: Option<&Path>,
+    ) -> Result<Context, ContextError> {
+        let is_osim = model_path.extension().is_some_and(|e| e.eq_ignore_ascii_case("osim"));
+        let (mut model, warnings) =
+            if is_osim { crate::io::osim::read_osim(model_path)? } else { mjcf::read_mjcf(model_path)? };
+        if let Some(ms) = marker_set {
+            let markers = crate::io::osim::read_marker_set(ms, &model)?;
+            model = model
+                .with_markers(markers)
+                .map_err(|e| ContextError::Settings { path: ms.display().to_string(), message: e.to_string() })?;
+        }
         let (profile, name) = match profile_path {
             Some(p) => (Profile::read(p)?, p.display().to_string()),
             None => (Profile::default_for(&model), "<default profile>".to_string()),
