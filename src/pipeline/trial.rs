@@ -8,7 +8,7 @@ use crate::io::MarkerTrial;
 use crate::kinematics::assembly::FrameProblem;
 use crate::model::proxy::ProxyKind;
 use crate::solve::calibrate::track;
-use crate::solve::init::cold_start;
+use crate::solve::init::{cold_start, wrap_angle};
 use crate::solve::{calibrate, make_qp, Calibration, FrameSolver, FrameStats, FrameStatus, WarmStart};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -254,7 +254,16 @@ pub fn solve_trial(
         proxies[f] = match (before, after) {
             (Some(&g0), Some(&g1)) => {
                 let w = (f - g0) as f64 / (g1 - g0) as f64;
-                (0..np).map(|k| (1.0 - w) * proxies[g0][k] + w * proxies[g1][k]).collect()
+                (0..np)
+                    .map(|k| {
+                        let (a, b) = (proxies[g0][k], proxies[g1][k]);
+                        // Unbounded angles (a root heading) go the short way round.
+                        let px = &ctx.proxy.proxies[k];
+                        let unbounded = px.range.0 == f64::NEG_INFINITY && px.range.1 == f64::INFINITY;
+                        let d = if px.kind == ProxyKind::Rotation && unbounded { wrap_angle(b - a) } else { b - a };
+                        a + w * d
+                    })
+                    .collect()
             }
             (Some(&g), None) | (None, Some(&g)) => proxies[g].clone(),
             (None, None) => calibration.proxies.clone(),
