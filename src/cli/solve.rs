@@ -19,6 +19,14 @@ pub struct SolveArgs {
     /// Solver profile (TOML); the model's default profile when absent.
     #[arg(long)]
     pub profile: Option<PathBuf>,
+    /// OpenSim Scale tool setup: its scale groups (measurement and manual scale sets), marker
+    /// placement and static-pose weights; also its marker set and static trial when
+    /// `--markerset` / `--static` are not given.
+    #[arg(long)]
+    pub scale_setup: Option<PathBuf>,
+    /// Place the markers on the static trial after calibration (OpenSim's MarkerPlacer).
+    #[arg(long)]
+    pub place_markers: bool,
     /// Static calibration trial; without one, frames of the motion trials are used.
     #[arg(long = "static")]
     pub static_trial: Option<PathBuf>,
@@ -41,7 +49,35 @@ pub struct SolveArgs {
 
 pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
     anyhow::ensure!(a.markerset.is_none() || a.model.is_some(), "--markerset needs --model");
-    let mut ctx = super::load_context_with_markers(a.model.as_deref(), a.markerset.as_deref(), a.profile.as_deref())?;
+    let setup = match &a.scale_setup {
+        Some(p) => Some(crate::io::osim::read_scale_setup(p)?),
+        None => None,
+    };
+    let markerset = a.markerset.clone().or_else(|| setup.as_ref().and_then(|s| s.marker_set_file.clone()));
+    let static_path = match (&a.static_trial, setup.as_ref().and_then(|s| s.static_file.clone())) {
+        (Some(p), _) => Some(p.clone()),
+        (None, Some(p)) if p.exists() => Some(p),
+        (None, Some(p)) => anyhow::bail!(
+            "the scale setup's static trial {} does not exist; give the static trial with --static",
+            p.display()
+        ),
+        (None, None) => None,
+    };
+    let mut ctx = super::load_context_with_markers(a.model.as_deref(), markerset.as_deref(), a.profile.as_deref())?;
+    if let (Some(s), Some(p)) = (&setup, &a.scale_setup) {
+        let before = ctx.warnings.len();
+        ctx = ctx.with_scale_setup(s, &p.display().to_string())?;
+        for w in &ctx.warnings[before..] {
+            eprintln!("warning: {w}");
+        }
+    }
+    if a.place_markers {
+        ctx.settings.marker_placement = true;
+    }
+    // Without a static trial, calibration runs on the motion frames with the motion weights.
+    if static_path.is_none() {
+        ctx.calibration_weights = ctx.marker_weights.clone();
+    }
     if let Some(qp) = a.qp {
         ctx.settings.qp = crate::solve::backend_for(qp, &ctx.proxy);
         if ctx.settings.qp != qp {
@@ -61,7 +97,7 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         ),
         None => None,
     };
-    let static_trial = match &a.static_trial {
+    let static_trial = match &static_path {
         Some(p) => Some(crate::io::read_markers(p)?),
         None => None,
     };
@@ -74,12 +110,18 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
             Err(e) => report.push(Report::failed(&name, e.to_string())),
         }
     }
-    let calibration_input: Vec<(&str, &crate::io::MarkerTrial)> = match (&a.static_trial, &static_trial) {
+    let calibration_input: Vec<(&str, &crate::io::MarkerTrial)> = match (&static_path, &static_trial) {
         (Some(p), Some(st)) => vec![(p.to_str().unwrap_or("static"), st)],
         _ => loaded.iter().map(|(n, t)| (n.as_str(), t)).collect(),
     };
     let calibration =
         if calibration_input.is_empty() { None } else { Some(calibrate_subject(&ctx, &calibration_input)) };
+    // Marker placement moved the subject's markers: solve with them.
+    if let Some(Ok(c)) = &calibration {
+        if let Some(offsets) = &c.marker_offsets {
+            ctx = ctx.with_marker_offsets(offsets)?;
+        }
+    }
     for (name, t) in &loaded {
         let result = match &calibration {
             Some(Ok(c)) => solve_trial(&ctx, name, t, c, threads).map_err(|e| e.to_string()),

@@ -39,10 +39,12 @@
 mod func;
 mod joints;
 mod markers;
+mod scale_setup;
 mod xml;
 
 pub use func::simm_spline;
 pub use markers::{parse_marker_set, read_marker_set};
+pub use scale_setup::{parse_scale_setup, read_scale_setup, ScaleSetup};
 
 use crate::model::{Body, Coordinate, CoordinateCoupling, Function, Marker, Model, ModelError, Motion, MotionKind};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
@@ -277,7 +279,7 @@ impl<'c, 'a> Builder<'c, 'a> {
 
     fn markers(&mut self, m: Node<'a, 'a>) -> Result<(), OsimError> {
         for mk in set_objects(m, "MarkerSet").into_iter().filter(|n| n.has_tag_name("Marker")) {
-            let (name, body, offset) = markers::marker_fields(self.ctx, mk)?;
+            let (name, body, offset, fixed) = markers::marker_fields(self.ctx, mk)?;
             if body == "ground" {
                 self.ctx.warn(mk, &format!("marker '{name}' on ground skipped"));
                 continue;
@@ -290,7 +292,7 @@ impl<'c, 'a> Builder<'c, 'a> {
             if self.markers.iter().any(|x| x.name == name) {
                 return Err(self.ctx.err(mk, format!("duplicate marker name '{name}'")));
             }
-            self.markers.push(Marker { name: name.to_string(), body: b, offset, weight: 1.0 });
+            self.markers.push(Marker { name: name.to_string(), body: b, offset, weight: 1.0, fixed });
         }
         Ok(())
     }

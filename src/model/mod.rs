@@ -99,6 +99,9 @@ pub struct Marker {
     pub offset: Vector3<f64>,
     /// Weight on the squared marker error (OpenSim IK convention); 1 by default.
     pub weight: f64,
+    /// Kept where it is by marker placement (OpenSim `<fixed>`); false by default, as in OpenSim.
+    #[serde(default)]
+    pub fixed: bool,
 }
 
 /// A coordinate that is a function of another (OpenSim `CoordinateCouplerConstraint`, MuJoCo

@@ -36,8 +36,11 @@ pub struct Context {
     pub profile: Profile,
     pub proxy: ProxyMap,
     pub settings: SolverSettings,
-    /// Weight of each model marker's squared error (0 = excluded).
+    /// Weight of each model marker's squared error in motion frames (0 = excluded).
     pub marker_weights: Vec<f64>,
+    /// Weight of each model marker in calibration on a static trial (by default the same as
+    /// `marker_weights`; a Scale setup's marker placer tasks set their own).
+    pub calibration_weights: Vec<f64>,
     /// Where the model and profile came from (for reports).
     pub model_source: String,
     /// What the model importer ignored or approximated.
@@ -80,7 +83,7 @@ impl Context {
                 });
             }
         }
-        let marker_weights = model
+        let marker_weights: Vec<f64> = model
             .markers
             .iter()
             .map(|m| {
@@ -91,7 +94,16 @@ impl Context {
                 }
             })
             .collect();
-        Ok(Context { model, profile, proxy, settings, marker_weights, model_source, warnings: Vec::new() })
+        Ok(Context {
+            model,
+            profile,
+            proxy,
+            settings,
+            calibration_weights: marker_weights.clone(),
+            marker_weights,
+            model_source,
+            warnings: Vec::new(),
+        })
     }
 
     /// The shipped full-body model with its profile.
@@ -130,6 +142,83 @@ impl Context {
         let mut ctx = Context::new(model, profile, &name, model_path.display().to_string())?;
         ctx.warnings = warnings;
         Ok(ctx)
+    }
+
+    /// The same subject with its markers at `offsets` (unit-scale, body frame, m), e.g. after
+    /// marker placement ([`crate::solve::Calibration::marker_offsets`]).
+    pub fn with_marker_offsets(&self, offsets: &[nalgebra::Vector3<f64>]) -> Result<Context, ContextError> {
+        let mut model = self.model.clone();
+        for (m, o) in model.markers.iter_mut().zip(offsets) {
+            m.offset = *o;
+        }
+        let proxy = ProxyMap::new(&model, &self.profile)?;
+        Ok(Context {
+            model,
+            profile: self.profile.clone(),
+            proxy,
+            settings: self.settings.clone(),
+            marker_weights: self.marker_weights.clone(),
+            calibration_weights: self.calibration_weights.clone(),
+            model_source: self.model_source.clone(),
+            warnings: self.warnings.clone(),
+        })
+    }
+
+    /// The subject set up as an OpenSim Scale tool setup says: its scale groups replace the
+    /// profile's, marker placement follows its `MarkerPlacer`, and the placer's task weights
+    /// weight the static trial (markers without a task keep their weight). Bodies named by a
+    /// group that the model lacks are an error naming the valid bodies.
+    pub fn with_scale_setup(
+        &self,
+        setup: &crate::io::osim::ScaleSetup,
+        setup_name: &str,
+    ) -> Result<Context, ContextError> {
+        let mut profile = self.profile.clone();
+        let mut warnings = self.warnings.clone();
+        if !setup.scale_groups.is_empty() {
+            // Like OpenSim's ScaleTool, bodies the model lacks are skipped (with a warning).
+            let mut groups = setup.scale_groups.clone();
+            let mut missing = Vec::new();
+            for g in &mut groups {
+                g.bodies.retain(|b| {
+                    let known = self.model.body_index(b).is_some();
+                    if !known {
+                        missing.push(b.clone());
+                    }
+                    known
+                });
+            }
+            groups.retain(|g| !g.bodies.is_empty());
+            if !missing.is_empty() {
+                warnings.push(format!(
+                    "{setup_name}: scale set names bodies the model lacks, skipped: {}",
+                    missing.join(", ")
+                ));
+            }
+            profile.scale_groups = groups;
+        }
+        let proxy = ProxyMap::new(&self.model, &profile)
+            .map_err(|e| ContextError::Settings { path: setup_name.into(), message: e.to_string() })?;
+        let mut settings = self.settings.clone();
+        settings.marker_placement = setup.place_markers;
+        settings.qp = crate::solve::backend_for(settings.qp, &proxy);
+        let calibration_weights = self
+            .model
+            .markers
+            .iter()
+            .zip(&self.calibration_weights)
+            .map(|(m, &w)| setup.static_weights.get(&m.name).copied().unwrap_or(w))
+            .collect();
+        Ok(Context {
+            model: self.model.clone(),
+            profile,
+            proxy,
+            settings,
+            marker_weights: self.marker_weights.clone(),
+            calibration_weights,
+            model_source: self.model_source.clone(),
+            warnings,
+        })
     }
 
     /// Evaluator over this context's model and proxy map.

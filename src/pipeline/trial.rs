@@ -8,7 +8,8 @@ use crate::io::MarkerTrial;
 use crate::kinematics::assembly::FrameProblem;
 use crate::model::proxy::ProxyKind;
 use crate::solve::calibrate::track;
-use crate::solve::init::{cold_start, wrap_angle};
+use crate::solve::init::{cold_start, place_root, wrap_angle};
+use crate::solve::placement::place_markers;
 use crate::solve::{calibrate, make_qp, Calibration, FrameSolver, FrameStats, FrameStatus, WarmStart};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -94,12 +95,18 @@ pub fn calibrate_subject(ctx: &Context, trials: &[(&str, &MarkerTrial)]) -> Resu
     let per_trial = settings.calibration_frames.div_ceil(trials.len().max(1));
     let eval = ctx.evaluator();
     let zeros = vec![0.0; ctx.model.ny()];
-    let template = FrameProblem {
-        observed: &[],
-        marker_weights: &ctx.marker_weights,
-        tracking_ref: &zeros,
-        tracking_weights: &zeros,
-    };
+    // With placement, markers flagged fixed alone inform the scales when the model flags any.
+    let placing = settings.marker_placement;
+    let any_fixed = ctx.model.markers.iter().any(|m| m.fixed);
+    let weights: Vec<f64> = ctx
+        .model
+        .markers
+        .iter()
+        .zip(&ctx.calibration_weights)
+        .map(|(m, &w)| if placing && any_fixed && !m.fixed { 0.0 } else { w })
+        .collect();
+    let template =
+        FrameProblem { observed: &[], marker_weights: &weights, tracking_ref: &zeros, tracking_weights: &zeros };
     let mut solver = FrameSolver::new(&eval, settings.clone(), make_qp(settings.qp));
     let p0 = ctx.proxy.default_proxies();
     let mut pooled: Vec<f64> = Vec::new();
@@ -110,13 +117,13 @@ pub fn calibrate_subject(ctx: &Context, trials: &[(&str, &MarkerTrial)]) -> Resu
             return Err(no_match(ctx, name, t));
         }
         let o = observations(t, &map);
-        let chosen = calibration_frames(&o, &ctx.marker_weights, stride, per_trial, settings.min_markers);
+        let chosen = calibration_frames(&o, &weights, stride, per_trial, settings.min_markers);
         let Some(&last) = chosen.last() else { continue };
         // Track from the first frame to the last chosen one so that every chosen frame starts
         // from a pose continuous with the motion (a cold start far into a motion can land in a
         // wrong local minimum).
         let first = (0..=last)
-            .find(|&f| observed_count(&o[f * stride..(f + 1) * stride], &ctx.marker_weights) >= settings.min_markers)
+            .find(|&f| observed_count(&o[f * stride..(f + 1) * stride], &weights) >= settings.min_markers)
             .unwrap_or(0);
         let slices: Vec<&[f64]> = (first..=last).map(|f| &o[f * stride..(f + 1) * stride]).collect();
         let tracked = track(&mut solver, &slices, &template, &p0);
@@ -130,7 +137,47 @@ pub fn calibrate_subject(ctx: &Context, trials: &[(&str, &MarkerTrial)]) -> Resu
         return Err(TrialError::NothingToCalibrate { trial, min: settings.min_markers });
     }
     let slices: Vec<&[f64]> = pooled.chunks(stride).collect();
-    Ok(calibrate(&mut solver, &slices, &template, &p0, &starts))
+    let mut cal = calibrate(&mut solver, &slices, &template, &p0, &starts);
+    if placing {
+        let movable: Vec<bool> = ctx.model.markers.iter().map(|m| !m.fixed).collect();
+        let placed = place_markers(&ctx.model, &ctx.proxy, &slices, &cal.frame_proxies, &movable);
+        cal.marker_offsets = Some(placed.iter().zip(&ctx.model.markers).map(|(p, m)| p.unwrap_or(m.offset)).collect());
+    }
+    Ok(cal)
+}
+
+/// Solves a frame without a previous solution from several starts and keeps the lowest energy:
+/// the neutral pose with root placement and sweeps ([`cold_start`]), the neutral pose with the
+/// root placed only, and the calibration pose with the root placed. Distal chains with few markers
+/// (forearm pronation against humeral rotation) have local minima that a single start can land in,
+/// and a walk tracked from a wrong first frame stays in the wrong basin.
+fn first_frame(
+    solver: &mut FrameSolver<'_>,
+    frame: &FrameProblem<'_>,
+    p: &mut [f64],
+    calibrated: &[f64],
+) -> FrameStats {
+    let mut best: Option<(FrameStats, Vec<f64>)> = None;
+    for start in 0..3 {
+        let mut trial = if start == 2 { calibrated.to_vec() } else { p.to_vec() };
+        solver.clamp(&mut trial);
+        if start == 0 {
+            cold_start(solver, frame, &mut trial);
+        } else {
+            place_root(solver, frame, &mut trial);
+        }
+        let stats = solver.solve(frame, &mut trial);
+        if stats.status == FrameStatus::TooFewMarkers {
+            p.copy_from_slice(&trial);
+            return stats;
+        }
+        if best.as_ref().is_none_or(|(b, _)| stats.energy < b.energy) {
+            best = Some((stats, trial));
+        }
+    }
+    let (stats, q) = best.expect("three starts");
+    p.copy_from_slice(&q);
+    stats
 }
 
 fn no_match(ctx: &Context, name: &str, trial: &MarkerTrial) -> TrialError {
@@ -219,10 +266,11 @@ pub fn solve_trial(
                         tracking_ref: &reference,
                         tracking_weights: &track_w,
                     };
-                    if prev.is_none() {
-                        cold_start(&mut solver, &frame, &mut p);
-                    }
-                    let stats = solver.solve(&frame, &mut p);
+                    let stats = if prev.is_none() {
+                        first_frame(&mut solver, &frame, &mut p, &calibration.proxies)
+                    } else {
+                        solver.solve(&frame, &mut p)
+                    };
                     let ok = stats.status != FrameStatus::TooFewMarkers;
                     out.push((p.clone(), stats, t0.elapsed().as_secs_f64()));
                     if ok {

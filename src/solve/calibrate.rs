@@ -33,6 +33,13 @@ pub struct Calibration {
     pub iterations: u32,
     /// Mean marker RMSE over the calibration frames (m).
     pub rmse_m: f64,
+    /// Final proxies of every calibration frame (shared scales, own pose).
+    #[serde(skip)]
+    pub frame_proxies: Vec<Vec<f64>>,
+    /// Every model marker's unit-scale offset (body frame, m) after marker placement; `None`
+    /// when placement did not run.
+    #[serde(skip)]
+    pub marker_offsets: Option<Vec<nalgebra::Vector3<f64>>>,
 }
 
 /// Calibrates the scale proxies on `frames` (observed marker arrays, `3·marker + axis`, NaN gaps).
@@ -188,11 +195,16 @@ pub fn calibrate(
             }
         }
     }
+    for p in &mut poses {
+        for (i, &k) in scale.iter().enumerate() {
+            p[k] = shared[i];
+        }
+    }
     let mut proxies = poses.last().cloned().unwrap_or_else(|| p0.to_vec());
     for (i, &k) in scale.iter().enumerate() {
         proxies[k] = shared[i];
     }
-    Calibration { proxies, frames: frames.len(), iterations, rmse_m: rmse }
+    Calibration { proxies, frames: frames.len(), iterations, rmse_m: rmse, frame_proxies: poses, marker_offsets: None }
 }
 
 /// The profile's constraints that involve scale proxies only, as constraints on a step of the

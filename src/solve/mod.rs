@@ -3,6 +3,7 @@
 
 pub mod calibrate;
 pub mod init;
+pub mod placement;
 pub mod qp;
 pub mod settings;
 pub mod trqp;

@@ -77,6 +77,11 @@ pub struct SolverSettings {
     pub calibration_scale_prior: f64,
     /// Iteration cap of the multi-frame calibration. Default 50.
     pub calibration_max_iterations: u32,
+    /// Marker placement after calibration (OpenSim's MarkerPlacer): every marker not flagged
+    /// `fixed` moves to where the calibration frames observed it on its body. When some markers
+    /// are flagged fixed, only those inform the scales (the others are untrusted until placed).
+    /// Default false.
+    pub marker_placement: bool,
 }
 
 impl Default for SolverSettings {
@@ -103,6 +108,7 @@ impl Default for SolverSettings {
             calibration_frames: 20,
             calibration_scale_prior: 1e-6,
             calibration_max_iterations: 50,
+            marker_placement: false,
         }
     }
 }

@@ -111,6 +111,7 @@ pub fn random_model(seed: u64, nb: usize) -> Model {
                 body: b,
                 offset: Vector3::new(r.random_range(-0.2..0.2), r.random_range(-0.2..0.2), r.random_range(-0.2..0.2)),
                 weight: r.random_range(0.5..2.0),
+                fixed: false,
             });
         }
     }

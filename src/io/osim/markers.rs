@@ -26,7 +26,7 @@ pub fn parse_marker_set(text: &str, file_name: &str, model: &Model) -> Result<Ve
     };
     let mut markers = Vec::new();
     for mk in child(set, "objects").into_iter().flat_map(elements).filter(|n| n.has_tag_name("Marker")) {
-        let (name, body_name, offset) = marker_fields(&ctx, mk)?;
+        let (name, body_name, offset, fixed) = marker_fields(&ctx, mk)?;
         let Some(body) = model.body_index(body_name) else {
             let valid: Vec<&str> = model.bodies.iter().map(|b| b.name.as_str()).collect();
             let msg = format!("marker '{name}' is on unknown body '{body_name}' (valid bodies: {})", valid.join(", "));
@@ -35,7 +35,7 @@ pub fn parse_marker_set(text: &str, file_name: &str, model: &Model) -> Result<Ve
         if markers.iter().any(|m: &Marker| m.name == name) {
             return Err(ctx.err(mk, format!("duplicate marker name '{name}'")));
         }
-        markers.push(Marker { name: name.to_string(), body, offset, weight: 1.0 });
+        markers.push(Marker { name: name.to_string(), body, offset, weight: 1.0, fixed });
     }
     Ok(markers)
 }
@@ -44,7 +44,7 @@ pub fn parse_marker_set(text: &str, file_name: &str, model: &Model) -> Result<Ve
 pub(super) fn marker_fields<'a>(
     ctx: &Ctx<'a>,
     mk: Node<'a, 'a>,
-) -> Result<(&'a str, &'a str, Vector3<f64>), OsimError> {
+) -> Result<(&'a str, &'a str, Vector3<f64>, bool), OsimError> {
     let Some(name) = mk.attribute("name") else {
         return Err(ctx.err(mk, "marker without a name"));
     };
@@ -53,5 +53,6 @@ pub(super) fn marker_fields<'a>(
         return Err(ctx.err(mk, format!("marker '{name}' names no body (socket_parent_frame or body)")));
     };
     let offset = ctx.vec3(mk, "location")?.unwrap_or_default();
-    Ok((name, body, offset))
+    let fixed = ctx.boolean(mk, "fixed")?.unwrap_or(false);
+    Ok((name, body, offset, fixed))
 }

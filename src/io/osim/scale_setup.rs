@@ -1,0 +1,157 @@
+//! OpenSim Scale tool setups (`<ScaleTool>`), read so that a lab's scaling choices carry over to
+//! smocap's joint calibration:
+//! - which bodies share scale factors, and along which axes: from the `MeasurementSet` (each
+//!   measurement's `BodyScale`s and their `axes`) and the manual `ScaleSet` (bodies given the same
+//!   factors form one group), in the `ModelScaler`'s order; bodies named nowhere keep scale 1;
+//! - whether markers are placed on the static trial afterwards (`MarkerPlacer` `apply`) and with
+//!   which per-marker weights the static pose is fitted (its `IKTaskSet`);
+//! - the marker set file (`GenericModelMaker`), the static trial (`MarkerPlacer` `marker_file`)
+//!   and the subject mass, for information.
+//!
+//! smocap estimates the factors of those groups from the markers (jointly with the pose), rather
+//! than from marker-pair distances or manual values; the groups are what is kept.
+
+use super::xml::{child, elements, set_objects, Ctx};
+use super::{parse_xml, OsimError};
+use crate::model::profile::{ScaleAxes, ScaleGroup};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// What smocap takes from a Scale tool setup.
+#[derive(Clone, Debug, Default)]
+pub struct ScaleSetup {
+    /// Scale groups implied by the measurement and manual scale sets.
+    pub scale_groups: Vec<ScaleGroup>,
+    /// `MarkerPlacer` `apply`.
+    pub place_markers: bool,
+    /// Static-pose marker weights of the `MarkerPlacer` tasks (`apply` false → 0).
+    pub static_weights: BTreeMap<String, f64>,
+    /// `GenericModelMaker` `marker_set_file`, resolved against the setup's folder.
+    pub marker_set_file: Option<PathBuf>,
+    /// `MarkerPlacer` `marker_file` (the static trial), resolved against the setup's folder.
+    pub static_file: Option<PathBuf>,
+    /// Subject mass (kg), when given.
+    pub mass_kg: Option<f64>,
+}
+
+/// Reads a Scale tool setup file.
+pub fn read_scale_setup(path: &Path) -> Result<ScaleSetup, OsimError> {
+    let file = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|source| OsimError::Io { file: file.clone(), source })?;
+    parse_scale_setup(&text, &file, path.parent().unwrap_or(Path::new("")))
+}
+
+/// Parses Scale tool setup text; relative file names resolve against `base`.
+pub fn parse_scale_setup(text: &str, file_name: &str, base: &Path) -> Result<ScaleSetup, OsimError> {
+    let doc = parse_xml(text, file_name)?;
+    let ctx = Ctx::new(&doc, file_name);
+    let root = doc.root_element();
+    let tool = if root.has_tag_name("ScaleTool") { Some(root) } else { child(root, "ScaleTool") };
+    let Some(tool) = tool else {
+        return Err(ctx.err(root, "missing <ScaleTool>: not an OpenSim Scale tool setup"));
+    };
+    let resolve = |t: &str| (!t.is_empty() && t != "Unassigned").then(|| base.join(t));
+    let mut out = ScaleSetup { mass_kg: ctx.scalar(tool, "mass")?, ..Default::default() };
+    if let Some(maker) = child(tool, "GenericModelMaker") {
+        out.marker_set_file = ctx.text(maker, "marker_set_file").and_then(|(_, t)| resolve(t));
+    }
+    if let Some(scaler) = child(tool, "ModelScaler").filter(|s| ctx.boolean(*s, "apply").ok().flatten() != Some(false))
+    {
+        out.scale_groups = scale_groups(&ctx, scaler)?;
+    }
+    if let Some(placer) = child(tool, "MarkerPlacer") {
+        out.place_markers = ctx.boolean(placer, "apply")?.unwrap_or(true);
+        out.static_file = ctx.text(placer, "marker_file").and_then(|(_, t)| resolve(t));
+        for task in set_objects(placer, "IKTaskSet").into_iter().filter(|t| t.has_tag_name("IKMarkerTask")) {
+            let Some(name) = task.attribute("name") else {
+                return Err(ctx.err(task, "marker task without a name"));
+            };
+            let apply = ctx.boolean(task, "apply")?.unwrap_or(true);
+            let weight = ctx.scalar(task, "weight")?.unwrap_or(1.0);
+            if !(weight.is_finite() && weight >= 0.0) {
+                return Err(ctx.err(task, format!("weight {weight}: weights must be finite and ≥ 0")));
+            }
+            out.static_weights.insert(name.to_string(), if apply { weight } else { 0.0 });
+        }
+    }
+    Ok(out)
+}
+
+/// Per body and axis, the source of its factor: a measurement name or a manual factor.
+type AxisSources = BTreeMap<String, [Option<String>; 3]>;
+
+fn scale_groups(ctx: &Ctx<'_>, scaler: roxmltree::Node<'_, '_>) -> Result<Vec<ScaleGroup>, OsimError> {
+    let order = ctx.text(scaler, "scaling_order").map(|(_, t)| t.to_string()).unwrap_or_default();
+    let mut sources: AxisSources = BTreeMap::new();
+    let mut first_seen: Vec<String> = Vec::new();
+    let mut set = |body: &str, axis: usize, source: String| {
+        if !first_seen.iter().any(|b| b == body) {
+            first_seen.push(body.to_string());
+        }
+        sources.entry(body.to_string()).or_default()[axis] = Some(source);
+    };
+    for step in order.split_whitespace() {
+        match step {
+            "measurements" => {
+                let Some(ms) = child(scaler, "MeasurementSet") else { continue };
+                for m in child(ms, "objects").into_iter().flat_map(elements).filter(|n| n.has_tag_name("Measurement")) {
+                    if ctx.boolean(m, "apply")? == Some(false) {
+                        continue;
+                    }
+                    let name = m.attribute("name").unwrap_or("measurement");
+                    for bs in set_objects(m, "BodyScaleSet").into_iter().filter(|n| n.has_tag_name("BodyScale")) {
+                        let Some(body) = bs.attribute("name") else {
+                            return Err(ctx.err(bs, "BodyScale without a body name"));
+                        };
+                        let axes = ctx.text(bs, "axes").map(|(_, t)| t).unwrap_or("X Y Z");
+                        for a in axes.split_whitespace() {
+                            let axis = match a {
+                                "X" | "x" => 0,
+                                "Y" | "y" => 1,
+                                "Z" | "z" => 2,
+                                other => return Err(ctx.err(bs, format!("axis '{other}': expected X, Y or Z"))),
+                            };
+                            set(body, axis, format!("measurement {name}"));
+                        }
+                    }
+                }
+            }
+            "manualScale" => {
+                for s in set_objects(scaler, "ScaleSet").into_iter().filter(|n| n.has_tag_name("Scale")) {
+                    if ctx.boolean(s, "apply")? == Some(false) {
+                        continue;
+                    }
+                    let Some((_, body)) = ctx.text(s, "segment") else {
+                        return Err(ctx.err(s, "Scale without a <segment>"));
+                    };
+                    let f = ctx.fixed(s, "scales", 3, false)?.unwrap_or_else(|| vec![1.0; 3]);
+                    for (axis, v) in f.iter().enumerate() {
+                        set(body, axis, format!("manual {v}"));
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    // Bodies with identical sources on every axis share one group.
+    let mut groups: Vec<(Vec<String>, [Option<String>; 3])> = Vec::new();
+    for body in first_seen {
+        let src = sources[&body].clone();
+        match groups.iter_mut().find(|(_, s)| *s == src) {
+            Some((bodies, _)) => bodies.push(body),
+            None => groups.push((vec![body], src)),
+        }
+    }
+    Ok(groups
+        .into_iter()
+        .map(|(bodies, src)| {
+            let uniform = src[0].is_some() && src.iter().all(|s| *s == src[0]);
+            ScaleGroup {
+                name: bodies.join("+"),
+                bodies,
+                axes: if uniform { ScaleAxes::Uniform } else { ScaleAxes::Xyz },
+                range: [0.5, 2.0],
+            }
+        })
+        .collect())
+}
