@@ -37,11 +37,13 @@
 //!   ignored with one warning per component type.
 
 mod func;
+pub mod ik_setup;
 mod joints;
 mod markers;
 mod xml;
 
 pub use func::simm_spline;
+pub use ik_setup::{parse_ik_setup, read_ik_setup, IkSetup};
 pub use markers::{parse_marker_set, read_marker_set};
 
 use crate::model::{Body, Coordinate, CoordinateCoupling, Function, Marker, Model, ModelError, Motion, MotionKind};

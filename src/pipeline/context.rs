@@ -38,6 +38,13 @@ pub struct Context {
     pub settings: SolverSettings,
     /// Weight of each model marker's squared error (0 = excluded).
     pub marker_weights: Vec<f64>,
+    /// Soft coordinate targets (OpenSim IK coordinate tasks): each frame's objective gains
+    /// `½·w_j·(q_j − target_j)²` (rad or m) for every coordinate `j` with `w_j > 0`. Length nq.
+    pub coordinate_weights: Vec<f64>,
+    pub coordinate_targets: Vec<f64>,
+    /// The model's up direction in its world frame (opposite to its gravity); `None` when the
+    /// model has no gravity.
+    pub up: Option<nalgebra::Vector3<f64>>,
     /// Where the model and profile came from (for reports).
     pub model_source: String,
     /// What the model importer ignored or approximated.
@@ -45,7 +52,8 @@ pub struct Context {
 }
 
 impl Context {
-    /// Builds a context; `profile_name` is used in error messages.
+    /// Builds a context; `profile_name` is used in error messages. The model's up direction is
+    /// taken as +Z (MJCF's default gravity); readers of model files set it from the file.
     pub fn new(
         model: Model,
         profile: Profile,
@@ -91,14 +99,28 @@ impl Context {
                 }
             })
             .collect();
-        Ok(Context { model, profile, proxy, settings, marker_weights, model_source, warnings: Vec::new() })
+        let nq = model.nq();
+        Ok(Context {
+            model,
+            profile,
+            proxy,
+            settings,
+            marker_weights,
+            coordinate_weights: vec![0.0; nq],
+            coordinate_targets: vec![0.0; nq],
+            up: Some(nalgebra::Vector3::z()),
+            model_source,
+            warnings: Vec::new(),
+        })
     }
 
     /// The shipped full-body model with its profile.
     pub fn shipped() -> Result<Context, ContextError> {
         let model = mjcf::parse_mjcf(SHIPPED_MODEL, "models/fullbody.xml")?;
         let profile = Profile::parse(SHIPPED_PROFILE, Path::new("models/fullbody.toml"))?;
-        Context::new(model, profile, "models/fullbody.toml", "shipped:models/fullbody.xml".into())
+        let mut ctx = Context::new(model, profile, "models/fullbody.toml", "shipped:models/fullbody.xml".into())?;
+        ctx.up = crate::io::gravity::model_up(SHIPPED_MODEL, false);
+        Ok(ctx)
     }
 
     /// A model file (MJCF) with an optional profile file (default: every coordinate free,
@@ -129,7 +151,18 @@ impl Context {
         };
         let mut ctx = Context::new(model, profile, &name, model_path.display().to_string())?;
         ctx.warnings = warnings;
+        // The file was read once already, so a failure here is as unlikely as harmless.
+        ctx.up = std::fs::read_to_string(model_path).ok().and_then(|t| crate::io::gravity::model_up(&t, is_osim));
         Ok(ctx)
+    }
+
+    /// Tracking arrays (length ny) holding only the coordinate targets: `(reference, weights)`.
+    pub fn coordinate_tracking(&self) -> (Vec<f64>, Vec<f64>) {
+        let ny = self.model.ny();
+        let (mut r, mut w) = (self.coordinate_targets.clone(), self.coordinate_weights.clone());
+        r.resize(ny, 0.0);
+        w.resize(ny, 0.0);
+        (r, w)
     }
 
     /// Evaluator over this context's model and proxy map.
