@@ -154,6 +154,11 @@ fn a_frame_with_every_marker_missing_is_reported_and_the_rest_solved() {
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     assert_eq!(v["trials"][0]["bridged_frames"], serde_json::json!([10]));
     assert_eq!(v["trials"][0]["frames"], 40);
+    let gaps = &v["trials"][0]["gaps"];
+    assert_eq!(gaps["frames_below_min_markers"], 1);
+    let markers = gaps["markers"].as_array().unwrap();
+    assert_eq!(gaps["missing_samples"].as_u64().unwrap() as usize, markers.len());
+    assert!(markers.iter().all(|m| m["missing"] == 1 && m["longest_gap"] == 1 && m["missing_fraction"] == 1.0 / 40.0));
 }
 
 #[test]
@@ -166,6 +171,9 @@ fn markers_summarises_a_file_with_its_gaps_as_json() {
     assert_eq!(v["rate_hz"], 100.0);
     assert_eq!(v["markers"][0]["label"], "A");
     assert_eq!(v["markers"][0]["gaps"], 1);
+    assert_eq!(v["markers"][0]["longest_gap"], 1);
+    assert_eq!(v["missing_samples"], 1);
+    assert!((v["markers"][0]["missing_fraction"].as_f64().unwrap() - 1.0 / 3.0).abs() < 1e-12);
     let o = smocap(&["markers", "trial.xyz"]);
     assert_clean_failure(&o, "unsupported marker file type");
 }
@@ -195,4 +203,175 @@ fn solves_an_opensim_model_with_a_marker_set_and_a_static_trial() {
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     assert_eq!(v["trials"][0]["frames"], 151);
     assert!(v["trials"][0]["marker_rmse_mm"]["p50"].as_f64().unwrap() < 60.0);
+}
+
+fn shared(rel: &str) -> Option<PathBuf> {
+    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared").join(rel);
+    if p.exists() {
+        Some(p)
+    } else {
+        eprintln!("skipped: {} is absent", p.display());
+        None
+    }
+}
+
+#[test]
+fn a_truncated_c3d_is_an_error_saying_so() {
+    let Some(src) = shared("datasets/c3d_sample01/Eb015pi.c3d") else { return };
+    let bytes = std::fs::read(src).unwrap();
+    let cut = tmp("cut.c3d");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let o = smocap(&["solve", cut.to_str().unwrap()]);
+    assert_clean_failure(&o, "truncated");
+    assert!(stderr(&o).contains("cut.c3d"), "{}", stderr(&o));
+    let o = smocap(&["markers", cut.to_str().unwrap()]);
+    assert_clean_failure(&o, "truncated");
+}
+
+#[test]
+fn a_trc_with_a_ragged_row_is_an_error_naming_the_line() {
+    let p = one_marker_trc("ragged.trc", "A", &["1\t0.0\t1.0\t2.0\t3.0", "2\t0.01\t1.0\t2.0\t3.0\t4.0\t5.0"]);
+    let o = smocap(&["solve", p.to_str().unwrap()]);
+    assert_clean_failure(&o, "ragged.trc:7");
+    assert!(stderr(&o).contains("coordinate cells"), "{}", stderr(&o));
+}
+
+/// The gait2354 model with `edit` applied, written to a temporary file.
+fn edited_gait2354(name: &str, file: &str, edit: impl Fn(&str) -> String) -> Option<PathBuf> {
+    let src = shared(&format!("datasets/gait2354_subject01/{file}"))?;
+    let p = tmp(name);
+    std::fs::write(&p, edit(&std::fs::read_to_string(src).unwrap())).unwrap();
+    Some(p)
+}
+
+#[test]
+fn an_osim_with_an_unsupported_joint_type_is_an_error_listing_the_supported_ones() {
+    let Some(model) = edited_gait2354("planar.osim", "gait2354_simbody.osim", |t| {
+        t.replacen("<CustomJoint name=", "<PlanarJoint name=", 1).replacen("</CustomJoint>", "</PlanarJoint>", 1)
+    }) else {
+        return;
+    };
+    let trc = one_marker_trc("any2.trc", "A", &["1\t0.0\t1.0\t2.0\t3.0"]);
+    let o = smocap(&["solve", "--model", model.to_str().unwrap(), trc.to_str().unwrap()]);
+    assert_clean_failure(&o, "PlanarJoint");
+    assert!(stderr(&o).contains("planar.osim:") && stderr(&o).contains("CustomJoint, PinJoint"), "{}", stderr(&o));
+}
+
+#[test]
+fn a_marker_set_on_a_body_the_model_lacks_is_an_error_naming_it() {
+    let (Some(model), Some(set)) = (
+        shared("datasets/gait2354_subject01/gait2354_simbody.osim"),
+        edited_gait2354("badset.xml", "gait2354_Scale_MarkerSet.xml", |t| t.replacen("torso", "thorax_x", 1)),
+    ) else {
+        return;
+    };
+    let trc = one_marker_trc("any3.trc", "A", &["1\t0.0\t1.0\t2.0\t3.0"]);
+    let o = smocap(&[
+        "solve",
+        "--model",
+        model.to_str().unwrap(),
+        "--markerset",
+        set.to_str().unwrap(),
+        trc.to_str().unwrap(),
+    ]);
+    assert_clean_failure(&o, "thorax_x");
+    assert!(stderr(&o).contains("badset.xml:") && stderr(&o).contains("valid bodies"), "{}", stderr(&o));
+}
+
+#[test]
+fn an_ik_setup_sets_weights_warns_on_unknown_tasks_and_refuses_from_file() {
+    let Some(d) = shared("datasets/gait2354_subject01") else { return };
+    let path = |f: &str| d.join(f).to_str().unwrap().to_string();
+    let setup = std::fs::read_to_string(d.join("subject01_Setup_IK.xml")).unwrap();
+    let unknown = tmp("ik_unknown.xml");
+    std::fs::write(&unknown, setup.replacen("\"Sternum\"", "\"NoSuchMarker\"", 1)).unwrap();
+    let report = tmp("ik_report.json");
+    let args = |ik: &PathBuf| {
+        smocap(&[
+            "solve",
+            "--model",
+            &path("gait2354_simbody.osim"),
+            "--markerset",
+            &path("gait2354_Scale_MarkerSet.xml"),
+            "--static",
+            &path("subject01_static.trc"),
+            &path("subject01_walk1.trc"),
+            "--ik-setup",
+            ik.to_str().unwrap(),
+            "--report-json",
+            report.to_str().unwrap(),
+        ])
+    };
+    let o = args(&unknown);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(err.contains("warning:") && err.contains("'NoSuchMarker'") && err.contains("lacks"), "{err}");
+    assert!(err.contains("30 markers weighted") && err.contains("4 coordinate targets"), "{err}");
+    assert!(err.contains("up y (detected)"), "{err}");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(v["trials"][0]["input"]["up"], "y");
+    assert_eq!(v["static_input"]["units"], "mm");
+    let from_file = tmp("ik_from_file.xml");
+    std::fs::write(&from_file, setup.replacen("<value_type>default_value", "<value_type>from_file", 1)).unwrap();
+    let o = args(&from_file);
+    assert_clean_failure(&o, "from_file is not supported");
+}
+
+/// Rewrites every position of a TRC file (mm) through `f`, and its labels through `label`.
+fn rewrite_trc(
+    src: &std::path::Path,
+    dst: &std::path::Path,
+    f: impl Fn([f64; 3]) -> [f64; 3],
+    label: impl Fn(&str) -> String,
+) {
+    let mut t = smocap::io::trc::read_trc(src).unwrap();
+    for p in t.positions.chunks_exact_mut(3) {
+        if p[0].is_finite() {
+            p.copy_from_slice(&f([p[0], p[1], p[2]]));
+        }
+    }
+    t.labels = t.labels.iter().map(|l| label(l)).collect();
+    smocap::io::trc::write_trc(dst, &t, "mm").unwrap();
+}
+
+#[test]
+fn y_up_prefixed_data_solve_like_the_original_z_up_data() {
+    let (trc, truth) = (tmp("zup.trc"), tmp("zup.json"));
+    let o = smocap(&[
+        "synth",
+        "--frames",
+        "60",
+        "--seed",
+        "9",
+        "--out",
+        trc.to_str().unwrap(),
+        "--truth",
+        truth.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // As a Vicon lab would write it: Y up, labels with the subject's name.
+    let yup = tmp("yup.trc");
+    rewrite_trc(&trc, &yup, |[x, y, z]| [x, z, -y], |l| format!("Derrick:{l}"));
+    let mut rmse = Vec::new();
+    for (file, up) in [(&trc, "z"), (&yup, "y")] {
+        let report = tmp(&format!("updown_{up}.json"));
+        let o = smocap(&["solve", file.to_str().unwrap(), "--threads", "1", "--report-json", report.to_str().unwrap()]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(stderr(&o).contains(&format!("up {up} (detected)")), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        let t = &v["trials"][0];
+        assert_eq!(t["input"]["up"], up);
+        assert_eq!(t["input"]["rotation"].is_null(), up == "z");
+        assert_eq!(t["unmatched_trial_markers"], serde_json::json!([]));
+        assert_eq!(t["renamed_markers"].is_null(), up == "z", "{}", t["renamed_markers"]);
+        rmse.push(t["marker_rmse_mm"]["p50"].as_f64().unwrap());
+    }
+    assert!((rmse[0] - rmse[1]).abs() < 1e-3 * rmse[0], "{rmse:?}");
+    // Told an axis and units, it does as told and says so.
+    let o = smocap(&["solve", yup.to_str().unwrap(), "--up", "z", "--units", "m", "--threads", "1"]);
+    assert!(
+        stderr(&o).contains("up z (command line)") && stderr(&o).contains("units m (command line)"),
+        "{}",
+        stderr(&o)
+    );
 }

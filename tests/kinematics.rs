@@ -283,3 +283,90 @@ fn jacobian_matches_finite_differences_on_the_shipped_model() {
     }
     assert_jacobian_matches_fd(&model, &y, "fullbody");
 }
+
+#[test]
+fn coordinate_targets_fold_into_tracking_with_consistent_derivatives() {
+    use smocap::kinematics::assembly::fold_tracking_reference;
+    // Targets on two spine coordinates driven by one polynomial proxy, and on a free coordinate.
+    let model = random_model(3, 7);
+    let nq = model.nq();
+    let names: Vec<String> = model.coordinates[6..nq - 2].iter().take(3).map(|c| c.name.clone()).collect();
+    let text = format!(
+        "[[coupling]]\nproxy = \"spine\"\nrange = [-1.0, 1.0]\ncoordinates = [{}]\ncoefficients = [[0.0, 0.3, 0.05], [0.1, 0.5], [0.0, 0.2, -0.1, 0.02]]\n",
+        names.iter().map(|n| format!("\"{n}\"")).collect::<Vec<_>>().join(", ")
+    );
+    let mut profile = Profile::parse(&text, std::path::Path::new("test.toml")).unwrap();
+    profile.scale_groups = Profile::default_for(&model).scale_groups;
+    let free = model.coordinates[nq - 1].name.clone();
+    let mut ctx = smocap::pipeline::Context::new(model, profile, "test.toml", "test".into()).unwrap();
+    let setup = format!(
+        "<InverseKinematicsTool><IKTaskSet><objects>\
+         <IKCoordinateTask name=\"{}\"><weight>4</weight><value_type>manual_value</value_type><value>0.2</value></IKCoordinateTask>\
+         <IKCoordinateTask name=\"{}\"><weight>2.5</weight><value_type>manual_value</value_type><value>-0.1</value></IKCoordinateTask>\
+         <IKCoordinateTask name=\"{free}\"><weight>7</weight></IKCoordinateTask>\
+         </objects></IKTaskSet></InverseKinematicsTool>",
+        names[0], names[2]
+    );
+    let done = ctx.apply_ik_setup(&smocap::io::osim::parse_ik_setup(&setup, "ik.xml").unwrap()).unwrap();
+    assert_eq!(done.coordinate_targets, 3);
+    ctx.marker_weights.iter_mut().for_each(|w| *w = 1.0);
+    let (model, proxy) = (&ctx.model, &ctx.proxy);
+    let eval = Evaluator::new(model, proxy);
+    let mut ws = EvalWorkspace::new(model, proxy);
+    let mut r = common::rng(77);
+    use rand::RngExt;
+    let (ny, np) = (model.ny(), proxy.np());
+    // A pose prior toward a reference (as the trial solver's), with the targets folded in.
+    let base_w: Vec<f64> = (0..ny).map(|j| if j < nq { 0.3 } else { 0.0 }).collect();
+    let mut reference: Vec<f64> = (0..ny).map(|_| r.random_range(-0.5..0.5)).collect();
+    let base_ref = reference.clone();
+    let (coord_ref, coord_w) = ctx.coordinate_tracking();
+    fold_tracking_reference(&mut reference, &base_w, &coord_ref, &coord_w);
+    let weights: Vec<f64> = base_w.iter().zip(&coord_w).map(|(a, b)| a + b).collect();
+    let p: Vec<f64> = proxy.proxies.iter().map(|px| px.default + r.random_range(-0.3..0.3)).collect();
+    let obs: Vec<f64> = markers_at(model, &proxy.state(&p)).iter().map(|v| v + r.random_range(-0.05..0.05)).collect();
+    let folded = FrameProblem {
+        observed: &obs,
+        marker_weights: &ctx.marker_weights,
+        tracking_ref: &reference,
+        tracking_weights: &weights,
+    };
+    // The folded objective equals markers + prior + ½ Σ w (y − target)², up to a constant.
+    let separate = |q: &[f64], ws: &mut EvalWorkspace| {
+        let base = FrameProblem { tracking_ref: &base_ref, tracking_weights: &base_w, ..folded };
+        let y = proxy.state(q);
+        eval.energy(q, &base, ws).0 + (0..nq).map(|j| 0.5 * coord_w[j] * (y[j] - coord_ref[j]).powi(2)).sum::<f64>()
+    };
+    let offset = eval.energy(&p, &folded, &mut ws).0 - separate(&p, &mut ws);
+    for _ in 0..5 {
+        let q: Vec<f64> = p.iter().map(|v| v + r.random_range(-0.2..0.2)).collect();
+        let d = eval.energy(&q, &folded, &mut ws).0 - separate(&q, &mut ws);
+        assert!((d - offset).abs() < 1e-10 * offset.abs().max(1.0), "{d} vs {offset}");
+    }
+    // Gradient: central differences of the energy; H: Gauss–Newton from residual Jacobians.
+    eval.linearize(&p, &folded, &mut ws);
+    let (g, hm) = (ws.gn.g.clone(), ws.gn.h.clone());
+    let h = 1e-6;
+    let resid = |q: &[f64], ws: &mut EvalWorkspace| -> Vec<f64> {
+        eval.energy(q, &folded, ws);
+        let mut out: Vec<f64> = (0..3 * model.markers.len()).map(|i| ws.kin.markers[i] - obs[i]).collect();
+        out.extend((0..ny).map(|j| weights[j].sqrt() * (ws.y[j] - reference[j])));
+        out
+    };
+    let mut cols = Vec::with_capacity(np);
+    for k in 0..np {
+        let (mut pp, mut pm) = (p.clone(), p.clone());
+        pp[k] += h;
+        pm[k] -= h;
+        let fd = (eval.energy(&pp, &folded, &mut ws).0 - eval.energy(&pm, &folded, &mut ws).0) / (2.0 * h);
+        assert!((fd - g[k]).abs() <= 1e-6 * g[k].abs().max(1.0), "g[{k}] {} vs fd {fd}", g[k]);
+        let (a, b) = (resid(&pp, &mut ws), resid(&pm, &mut ws));
+        cols.push(a.iter().zip(&b).map(|(x, y)| (x - y) / (2.0 * h)).collect::<Vec<f64>>());
+    }
+    for i in 0..np {
+        for j in 0..np {
+            let fd: f64 = cols[i].iter().zip(&cols[j]).map(|(a, b)| a * b).sum();
+            assert!((fd - hm[(i, j)]).abs() <= 1e-5 * fd.abs().max(1.0), "H[{i},{j}] {} vs {fd}", hm[(i, j)]);
+        }
+    }
+}

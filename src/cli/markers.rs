@@ -18,8 +18,9 @@ pub struct MarkersArgs {
 #[derive(Serialize)]
 struct MarkerSummary {
     label: String,
-    /// Frames where the marker is missing.
+    /// Frames where the marker is missing, as a count and a fraction of the frames.
     gaps: usize,
+    missing_fraction: f64,
     /// Longest run of missing frames.
     longest_gap: usize,
 }
@@ -33,25 +34,19 @@ struct Summary {
     units: String,
     start_s: f64,
     end_s: f64,
+    /// Missing (frame, marker) samples over all markers.
+    missing_samples: usize,
     markers: Vec<MarkerSummary>,
     warnings: Vec<String>,
 }
 
 pub fn run(a: MarkersArgs) -> anyhow::Result<u8> {
     let t = read_markers(&a.file)?;
-    let markers = (0..t.n_markers())
+    let markers: Vec<MarkerSummary> = (0..t.n_markers())
         .map(|m| {
-            let (mut gaps, mut run, mut longest) = (0, 0, 0);
-            for f in 0..t.n_frames() {
-                if t.position(f, m).is_none() {
-                    gaps += 1;
-                    run += 1;
-                    longest = longest.max(run);
-                } else {
-                    run = 0;
-                }
-            }
-            MarkerSummary { label: t.labels[m].clone(), gaps, longest_gap: longest }
+            let (gaps, longest_gap) = t.gaps_and_longest(m);
+            let missing_fraction = gaps as f64 / t.n_frames().max(1) as f64;
+            MarkerSummary { label: t.labels[m].clone(), gaps, missing_fraction, longest_gap }
         })
         .collect();
     let s = Summary {
@@ -61,6 +56,7 @@ pub fn run(a: MarkersArgs) -> anyhow::Result<u8> {
         units: t.source_units.clone(),
         start_s: t.times.first().copied().unwrap_or(0.0),
         end_s: t.times.last().copied().unwrap_or(0.0),
+        missing_samples: markers.iter().map(|m| m.gaps).sum(),
         markers,
         warnings: t.warnings.clone(),
     };
@@ -78,9 +74,10 @@ pub fn run(a: MarkersArgs) -> anyhow::Result<u8> {
         s.markers.len(),
         s.units
     );
-    println!("{:<24} {:>8} {:>12}", "marker", "gaps", "longest gap");
+    println!("{} missing samples", s.missing_samples);
+    println!("{:<24} {:>8} {:>9} {:>12}", "marker", "gaps", "missing", "longest gap");
     for m in &s.markers {
-        println!("{:<24} {:>8} {:>12}", m.label, m.gaps, m.longest_gap);
+        println!("{:<24} {:>8} {:>8.1}% {:>12}", m.label, m.gaps, 100.0 * m.missing_fraction, m.longest_gap);
     }
     for w in &s.warnings {
         println!("warning: {w}");

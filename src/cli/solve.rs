@@ -45,6 +45,46 @@ pub struct SolveArgs {
     /// Write the JSON report here.
     #[arg(long)]
     pub report_json: Option<PathBuf>,
+    /// OpenSim IK setup (`<InverseKinematicsTool>`): its marker tasks replace the profile's marker
+    /// weights (markers without a task are not used, as in OpenSim); its coordinate tasks hold
+    /// coordinates softly at their values.
+    #[arg(long)]
+    pub ik_setup: Option<PathBuf>,
+    /// The marker data's up axis (detected when absent); the data are rotated into the model's.
+    #[arg(long, value_enum)]
+    pub up: Option<crate::pipeline::convention::UpAxis>,
+    /// Length units of the marker files, overriding their headers.
+    #[arg(long, value_enum)]
+    pub units: Option<crate::pipeline::convention::Units>,
+}
+
+/// Applies `--ik-setup` to the context, printing what it did.
+fn apply_ik_setup(ctx: &mut crate::pipeline::Context, path: &std::path::Path) -> anyhow::Result<()> {
+    let setup = crate::io::osim::read_ik_setup(path)?;
+    let done = ctx.apply_ik_setup(&setup)?;
+    for w in setup.warnings.iter().chain(&done.warnings) {
+        eprintln!("warning: {w}");
+    }
+    eprintln!(
+        "{}: {} markers weighted, {} without a task (unused, as in OpenSim), {} coordinate targets; its time range and files are not used",
+        path.display(),
+        done.markers_weighted,
+        done.markers_without_task.len(),
+        done.coordinate_targets
+    );
+    Ok(())
+}
+
+/// Reads a marker file and brings it into the model's units and up axis, saying what was done.
+fn read_trial(
+    ctx: &crate::pipeline::Context,
+    path: &std::path::Path,
+    opt: &crate::pipeline::convention::InputOptions,
+) -> anyhow::Result<(crate::io::MarkerTrial, crate::pipeline::convention::InputConventions)> {
+    let mut t = crate::io::read_markers(path)?;
+    let conv = crate::pipeline::convention::conform_trial(ctx, &mut t, opt);
+    eprintln!("{}: {}", path.display(), conv.summary());
+    Ok((t, conv))
 }
 
 pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
@@ -74,16 +114,20 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
     if a.place_markers {
         ctx.settings.marker_placement = true;
     }
-    // Without a static trial, calibration runs on the motion frames with the motion weights.
-    if static_path.is_none() {
-        ctx.calibration_weights = ctx.marker_weights.clone();
-    }
     if let Some(qp) = a.qp {
         ctx.settings.qp = crate::solve::backend_for(qp, &ctx.proxy);
         if ctx.settings.qp != qp {
             eprintln!("note: the profile has general linear constraints, which only the clarabel QP backend solves");
         }
     }
+    if let Some(p) = &a.ik_setup {
+        apply_ik_setup(&mut ctx, p)?;
+    }
+    // Without a static trial, calibration runs on the motion frames with the motion weights.
+    if static_path.is_none() {
+        ctx.calibration_weights = ctx.marker_weights.clone();
+    }
+    let input_opt = crate::pipeline::convention::InputOptions { up: a.up, units: a.units };
     let threads = a.threads.unwrap_or_else(super::default_threads).max(1);
     anyhow::ensure!(
         a.truth.is_none() || a.trials.len() == 1,
@@ -97,22 +141,26 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         ),
         None => None,
     };
+    let mut report = Report::new(&ctx, threads);
     let static_trial = match &static_path {
-        Some(p) => Some(crate::io::read_markers(p)?),
+        Some(p) => {
+            let (t, conv) = read_trial(&ctx, p, &input_opt)?;
+            report.static_input = Some(conv);
+            Some(t)
+        }
         None => None,
     };
-    let mut report = Report::new(&ctx, threads);
     let mut loaded = Vec::new();
     for p in &a.trials {
         let name = p.display().to_string();
-        match crate::io::read_markers(p) {
-            Ok(t) => loaded.push((name, t)),
-            Err(e) => report.push(Report::failed(&name, e.to_string())),
+        match read_trial(&ctx, p, &input_opt) {
+            Ok((t, conv)) => loaded.push((name, t, conv)),
+            Err(e) => report.push(Report::failed(&name, format!("{e:#}"))),
         }
     }
     let calibration_input: Vec<(&str, &crate::io::MarkerTrial)> = match (&static_path, &static_trial) {
         (Some(p), Some(st)) => vec![(p.to_str().unwrap_or("static"), st)],
-        _ => loaded.iter().map(|(n, t)| (n.as_str(), t)).collect(),
+        _ => loaded.iter().map(|(n, t, _)| (n.as_str(), t)).collect(),
     };
     let calibration =
         if calibration_input.is_empty() { None } else { Some(calibrate_subject(&ctx, &calibration_input)) };
@@ -122,7 +170,7 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
             ctx = ctx.with_marker_offsets(offsets)?;
         }
     }
-    for (name, t) in &loaded {
+    for (name, t, conv) in &loaded {
         let result = match &calibration {
             Some(Ok(c)) => solve_trial(&ctx, name, t, c, threads).map_err(|e| e.to_string()),
             Some(Err(e)) => Err(format!("calibration failed: {e}")),
@@ -138,7 +186,9 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
                         ctx.settings.min_markers
                     );
                 }
-                report.push(trial_report(&ctx, &r, truth.as_ref()));
+                let mut tr = trial_report(&ctx, &r, truth.as_ref());
+                tr.input = Some(conv.clone());
+                report.push(tr);
             }
             Err(e) => report.push(Report::failed(name, e)),
         }

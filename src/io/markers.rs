@@ -87,6 +87,21 @@ impl MarkerTrial {
         (0..self.n_markers()).map(|m| (0..self.n_frames()).filter(|&f| self.position(f, m).is_none()).count()).collect()
     }
 
+    /// Missing frames of marker `m` and its longest run of consecutive missing frames.
+    pub fn gaps_and_longest(&self, m: usize) -> (usize, usize) {
+        let (mut gaps, mut run, mut longest) = (0, 0, 0);
+        for f in 0..self.n_frames() {
+            if self.position(f, m).is_none() {
+                gaps += 1;
+                run += 1;
+                longest = longest.max(run);
+            } else {
+                run = 0;
+            }
+        }
+        (gaps, longest)
+    }
+
     /// Time from the first to the last frame in seconds (0 with fewer than two frames).
     pub fn duration(&self) -> f64 {
         match (self.times.first(), self.times.last()) {
@@ -180,6 +195,7 @@ mod tests {
         assert_eq!(t.frame(1)[3..], [6.0, 7.0, 8.0]);
         assert_eq!(t.label_index("B"), Some(1));
         assert_eq!(t.gap_counts(), vec![1, 1]);
+        assert_eq!((t.gaps_and_longest(0), t.gaps_and_longest(1)), ((1, 1), (1, 1)));
         assert!((t.duration() - 0.02).abs() < 1e-15);
         assert!(t.check_consistent().is_ok());
         let s = t.select_frames(1..10);

@@ -37,12 +37,14 @@
 //!   ignored with one warning per component type.
 
 mod func;
+pub mod ik_setup;
 mod joints;
 mod markers;
 mod scale_setup;
 mod xml;
 
 pub use func::simm_spline;
+pub use ik_setup::{parse_ik_setup, read_ik_setup, IkSetup};
 pub use markers::{parse_marker_set, read_marker_set};
 pub use scale_setup::{parse_scale_setup, read_scale_setup, ScaleSetup};
 

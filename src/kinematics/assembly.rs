@@ -30,6 +30,19 @@ pub struct FrameProblem<'a> {
     pub tracking_weights: &'a [f64],
 }
 
+/// Folds a second tracking term into the reference of a first one: `w (y − r)² + v (y − t)²`
+/// equals `(w + v)(y − r')²` plus a constant, with `r' = (w·r + v·t)/(w + v)`. Sets `reference`
+/// to `r'` wherever `v > 0`; the caller uses `weights + other_weights` as the tracking weights.
+/// Allocation-free (used per frame).
+pub fn fold_tracking_reference(reference: &mut [f64], weights: &[f64], other_ref: &[f64], other_weights: &[f64]) {
+    for (j, &v) in other_weights.iter().enumerate() {
+        if v > 0.0 {
+            let w = weights[j].max(0.0);
+            reference[j] = (w * reference[j] + v * other_ref[j]) / (w + v);
+        }
+    }
+}
+
 /// Gauss–Newton model of one frame at the current proxies.
 #[derive(Clone, Debug)]
 pub struct GaussNewton {

@@ -30,7 +30,7 @@ pub enum ContextError {
 }
 
 /// Model, proxy map, marker weights and settings of one subject.
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 pub struct Context {
     pub model: Model,
     pub profile: Profile,
@@ -41,6 +41,13 @@ pub struct Context {
     /// Weight of each model marker in calibration on a static trial (by default the same as
     /// `marker_weights`; a Scale setup's marker placer tasks set their own).
     pub calibration_weights: Vec<f64>,
+    /// Soft coordinate targets (OpenSim IK coordinate tasks): each frame's objective gains
+    /// `½·w_j·(q_j − target_j)²` (rad or m) for every coordinate `j` with `w_j > 0`. Length nq.
+    pub coordinate_weights: Vec<f64>,
+    pub coordinate_targets: Vec<f64>,
+    /// The model's up direction in its world frame (opposite to its gravity); `None` when the
+    /// model has no gravity.
+    pub up: Option<nalgebra::Vector3<f64>>,
     /// Where the model and profile came from (for reports).
     pub model_source: String,
     /// What the model importer ignored or approximated.
@@ -48,7 +55,8 @@ pub struct Context {
 }
 
 impl Context {
-    /// Builds a context; `profile_name` is used in error messages.
+    /// Builds a context; `profile_name` is used in error messages. The model's up direction is
+    /// taken as +Z (MJCF's default gravity); readers of model files set it from the file.
     pub fn new(
         model: Model,
         profile: Profile,
@@ -94,6 +102,7 @@ impl Context {
                 }
             })
             .collect();
+        let nq = model.nq();
         Ok(Context {
             model,
             profile,
@@ -101,6 +110,9 @@ impl Context {
             settings,
             calibration_weights: marker_weights.clone(),
             marker_weights,
+            coordinate_weights: vec![0.0; nq],
+            coordinate_targets: vec![0.0; nq],
+            up: Some(nalgebra::Vector3::z()),
             model_source,
             warnings: Vec::new(),
         })
@@ -110,7 +122,9 @@ impl Context {
     pub fn shipped() -> Result<Context, ContextError> {
         let model = mjcf::parse_mjcf(SHIPPED_MODEL, "models/fullbody.xml")?;
         let profile = Profile::parse(SHIPPED_PROFILE, Path::new("models/fullbody.toml"))?;
-        Context::new(model, profile, "models/fullbody.toml", "shipped:models/fullbody.xml".into())
+        let mut ctx = Context::new(model, profile, "models/fullbody.toml", "shipped:models/fullbody.xml".into())?;
+        ctx.up = crate::io::gravity::model_up(SHIPPED_MODEL, false);
+        Ok(ctx)
     }
 
     /// A model file (MJCF) with an optional profile file (default: every coordinate free,
@@ -141,6 +155,8 @@ impl Context {
         };
         let mut ctx = Context::new(model, profile, &name, model_path.display().to_string())?;
         ctx.warnings = warnings;
+        // The file was read once already, so a failure here is as unlikely as harmless.
+        ctx.up = std::fs::read_to_string(model_path).ok().and_then(|t| crate::io::gravity::model_up(&t, is_osim));
         Ok(ctx)
     }
 
@@ -152,16 +168,7 @@ impl Context {
             m.offset = *o;
         }
         let proxy = ProxyMap::new(&model, &self.profile)?;
-        Ok(Context {
-            model,
-            profile: self.profile.clone(),
-            proxy,
-            settings: self.settings.clone(),
-            marker_weights: self.marker_weights.clone(),
-            calibration_weights: self.calibration_weights.clone(),
-            model_source: self.model_source.clone(),
-            warnings: self.warnings.clone(),
-        })
+        Ok(Context { model, proxy, ..self.clone() })
     }
 
     /// The subject set up as an OpenSim Scale tool setup says: its scale groups replace the
@@ -209,16 +216,16 @@ impl Context {
             .zip(&self.calibration_weights)
             .map(|(m, &w)| setup.static_weights.get(&m.name).copied().unwrap_or(w))
             .collect();
-        Ok(Context {
-            model: self.model.clone(),
-            profile,
-            proxy,
-            settings,
-            marker_weights: self.marker_weights.clone(),
-            calibration_weights,
-            model_source: self.model_source.clone(),
-            warnings,
-        })
+        Ok(Context { profile, proxy, settings, calibration_weights, warnings, ..self.clone() })
+    }
+
+    /// Tracking arrays (length ny) holding only the coordinate targets: `(reference, weights)`.
+    pub fn coordinate_tracking(&self) -> (Vec<f64>, Vec<f64>) {
+        let ny = self.model.ny();
+        let (mut r, mut w) = (self.coordinate_targets.clone(), self.coordinate_weights.clone());
+        r.resize(ny, 0.0);
+        w.resize(ny, 0.0);
+        (r, w)
     }
 
     /// Evaluator over this context's model and proxy map.

@@ -2,6 +2,9 @@
 //! (calibration, warm-started frames, gap bridging, segments in parallel) and reports.
 
 pub mod context;
+pub mod convention;
+pub mod ik_tasks;
+pub mod matching;
 pub mod report;
 pub mod stats;
 pub mod trial;

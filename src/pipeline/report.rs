@@ -1,6 +1,7 @@
 //! The JSON report (`--report-json`) and its human-readable table.
 
-use super::stats::{MeanP50P90, P50P90};
+use super::convention::InputConventions;
+use super::stats::{GapStats, MeanP50P90, P50P90};
 use super::{Context, TrialResult};
 use crate::model::proxy::ProxyKind;
 use crate::solve::{FrameStatus, SolverSettings};
@@ -49,6 +50,15 @@ pub struct TrialReport {
     pub frames_at_iteration_cap: usize,
     pub unmatched_model_markers: Vec<String>,
     pub unmatched_trial_markers: Vec<String>,
+    /// File labels matched to a model marker other than exactly (label → model marker).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub renamed_markers: BTreeMap<String, String>,
+    /// Missing data of the matched markers.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gaps: Option<GapStats>,
+    /// Units and up axis of the file, and what was done to bring it into the model's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub input: Option<InputConventions>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pose_error_deg: Option<PoseError>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -72,6 +82,9 @@ pub struct Report {
     pub threads: usize,
     pub model: String,
     pub settings: SolverSettings,
+    /// Units and up axis of the static trial, when one was given.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub static_input: Option<InputConventions>,
     pub trials: Vec<TrialReport>,
     pub totals: Totals,
 }
@@ -85,6 +98,7 @@ impl Report {
             threads,
             model: ctx.model_source.clone(),
             settings: ctx.settings.clone(),
+            static_input: None,
             trials: Vec::new(),
             totals: Totals::default(),
         }
@@ -116,6 +130,9 @@ impl Report {
             frames_at_iteration_cap: 0,
             unmatched_model_markers: Vec::new(),
             unmatched_trial_markers: Vec::new(),
+            renamed_markers: BTreeMap::new(),
+            gaps: None,
+            input: None,
             pose_error_deg: None,
             scale_error_pct: None,
         }
@@ -197,6 +214,9 @@ pub fn trial_report(ctx: &Context, r: &TrialResult, truth: Option<&Truth>) -> Tr
         frames_at_iteration_cap: r.stats.iter().filter(|s| s.status == FrameStatus::MaxIterations).count(),
         unmatched_model_markers: r.unmatched_model.clone(),
         unmatched_trial_markers: r.unmatched_trial.clone(),
+        renamed_markers: r.renamed.iter().cloned().collect(),
+        gaps: Some(r.gaps.clone()),
+        input: None,
         pose_error_deg,
         scale_error_pct,
     }

@@ -54,3 +54,26 @@ impl MeanP50P90 {
         MeanP50P90 { mean: mean(values), p50: percentile(values, 0.5), p90: percentile(values, 0.9) }
     }
 }
+
+/// Missing data of one trial, over the model markers that the file provides.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct GapStats {
+    /// Missing (frame, marker) samples, summed over those markers.
+    pub missing_samples: usize,
+    /// Frames with fewer than `min_markers` observed weighted markers (bridged).
+    pub frames_below_min_markers: usize,
+    /// Per model marker found in the file, in model order.
+    pub markers: Vec<MarkerGaps>,
+}
+
+/// Missing data of one marker.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MarkerGaps {
+    /// Model marker name.
+    pub marker: String,
+    /// Frames where it is missing, as a count and as a fraction of the trial's frames.
+    pub missing: usize,
+    pub missing_fraction: f64,
+    /// Longest run of consecutive missing frames.
+    pub longest_gap: usize,
+}

@@ -3,9 +3,11 @@
 //! segments solved in parallel, each cold-started. Frames with too few markers are reported and
 //! bridged from their neighbours.
 
+use super::matching::{match_names, MarkerMatch, MatchError};
+use super::stats::{GapStats, MarkerGaps};
 use super::Context;
 use crate::io::MarkerTrial;
-use crate::kinematics::assembly::FrameProblem;
+use crate::kinematics::assembly::{fold_tracking_reference, FrameProblem};
 use crate::model::proxy::ProxyKind;
 use crate::solve::calibrate::track;
 use crate::solve::init::{cold_start, place_root, wrap_angle};
@@ -19,6 +21,8 @@ use std::time::Instant;
 pub enum TrialError {
     #[error("trial '{trial}': none of its markers matches the model's (trial has: {trial_labels}; model has: {model_labels})")]
     NoMarkerMatch { trial: String, trial_labels: String, model_labels: String },
+    #[error("trial '{trial}': {source}")]
+    Matching { trial: String, source: MatchError },
     #[error("trial '{trial}' has no frames")]
     Empty { trial: String },
     #[error("trial '{trial}': no frame has at least {min} observed markers, nothing to calibrate on")]
@@ -41,19 +45,39 @@ pub struct TrialResult {
     /// Model markers the trial does not provide, and trial labels the model lacks.
     pub unmatched_model: Vec<String>,
     pub unmatched_trial: Vec<String>,
+    /// `(file label, model marker)` for markers matched other than exactly.
+    pub renamed: Vec<(String, String)>,
+    /// Missing data of the matched markers.
+    pub gaps: GapStats,
     /// Wall time of all frames (s), calibration excluded.
     pub wall_seconds: f64,
     pub threads: usize,
 }
 
-/// For each model marker, the trial column that observes it.
-pub fn match_markers(ctx: &Context, trial: &MarkerTrial) -> (Vec<Option<usize>>, Vec<String>, Vec<String>) {
-    let map: Vec<Option<usize>> =
-        ctx.model.markers.iter().map(|m| trial.labels.iter().position(|l| l == &m.name)).collect();
-    let unmatched_model =
-        ctx.model.markers.iter().zip(&map).filter(|(_, c)| c.is_none()).map(|(m, _)| m.name.clone()).collect();
-    let unmatched_trial = trial.labels.iter().filter(|l| ctx.model.marker_index(l).is_none()).cloned().collect();
-    (map, unmatched_model, unmatched_trial)
+/// For each model marker, the trial column that observes it (see [`super::matching`]); `name`
+/// names the trial in errors.
+pub fn match_markers(ctx: &Context, name: &str, trial: &MarkerTrial) -> Result<MarkerMatch, TrialError> {
+    let names: Vec<&str> = ctx.model.markers.iter().map(|m| m.name.as_str()).collect();
+    match_names(&names, &trial.labels).map_err(|source| TrialError::Matching { trial: name.into(), source })
+}
+
+/// Missing data of the matched markers; `below_min` frames had too few markers to solve.
+pub fn gap_stats(ctx: &Context, trial: &MarkerTrial, map: &[Option<usize>], below_min: usize) -> GapStats {
+    let n = trial.n_frames().max(1) as f64;
+    let markers: Vec<MarkerGaps> = ctx
+        .model
+        .markers
+        .iter()
+        .zip(map)
+        .filter_map(|(m, c)| c.map(|c| (m, trial.gaps_and_longest(c))))
+        .map(|(m, (missing, longest_gap))| MarkerGaps {
+            marker: m.name.clone(),
+            missing,
+            missing_fraction: missing as f64 / n,
+            longest_gap,
+        })
+        .collect();
+    GapStats { missing_samples: markers.iter().map(|m| m.missing).sum(), frames_below_min_markers: below_min, markers }
 }
 
 /// Observations in model-marker order, frame-major (`frame · 3M + 3·marker + axis`), NaN gaps.
@@ -94,7 +118,6 @@ pub fn calibrate_subject(ctx: &Context, trials: &[(&str, &MarkerTrial)]) -> Resu
     let stride = 3 * ctx.model.markers.len();
     let per_trial = settings.calibration_frames.div_ceil(trials.len().max(1));
     let eval = ctx.evaluator();
-    let zeros = vec![0.0; ctx.model.ny()];
     // With placement, markers flagged fixed alone inform the scales when the model flags any.
     let placing = settings.marker_placement;
     let any_fixed = ctx.model.markers.iter().any(|m| m.fixed);
@@ -105,14 +128,16 @@ pub fn calibrate_subject(ctx: &Context, trials: &[(&str, &MarkerTrial)]) -> Resu
         .zip(&ctx.calibration_weights)
         .map(|(m, &w)| if placing && any_fixed && !m.fixed { 0.0 } else { w })
         .collect();
+    // Coordinate targets (IK coordinate tasks) hold in calibration too.
+    let (coord_ref, coord_w) = ctx.coordinate_tracking();
     let template =
-        FrameProblem { observed: &[], marker_weights: &weights, tracking_ref: &zeros, tracking_weights: &zeros };
+        FrameProblem { observed: &[], marker_weights: &weights, tracking_ref: &coord_ref, tracking_weights: &coord_w };
     let mut solver = FrameSolver::new(&eval, settings.clone(), make_qp(settings.qp));
     let p0 = ctx.proxy.default_proxies();
     let mut pooled: Vec<f64> = Vec::new();
     let mut starts: Vec<Vec<f64>> = Vec::new();
     for (name, t) in trials {
-        let (map, _, _) = match_markers(ctx, t);
+        let map = match_markers(ctx, name, t)?.columns;
         if map.iter().all(Option::is_none) {
             return Err(no_match(ctx, name, t));
         }
@@ -200,14 +225,15 @@ pub fn solve_trial(
     let start = Instant::now();
     let nm = ctx.model.markers.len();
     let stride = 3 * nm;
-    let (map, unmatched_model, unmatched_trial) = match_markers(ctx, trial);
+    let matched = match_markers(ctx, name, trial)?;
+    let map = &matched.columns;
     if map.iter().all(Option::is_none) {
         return Err(no_match(ctx, name, trial));
     }
     if trial.n_frames() == 0 {
         return Err(TrialError::Empty { trial: name.into() });
     }
-    let obs = observations(trial, &map);
+    let obs = observations(trial, map);
     let settings = &ctx.settings;
     let eval = ctx.evaluator();
     let ny = ctx.model.ny();
@@ -222,6 +248,9 @@ pub fn solve_trial(
         track_w[t.y_index] =
             if kind == ProxyKind::Scale { settings.scale_tracking_weight } else { settings.pose_prior_weight };
     }
+    // Coordinate targets fold into the pose prior's reference (same objective up to a constant).
+    let (coord_ref, coord_w) = ctx.coordinate_tracking();
+    let track_w_all: Vec<f64> = track_w.iter().zip(&coord_w).map(|(a, b)| a + b).collect();
 
     let mut neutral = ctx.proxy.default_proxies();
     for (k, px) in ctx.proxy.proxies.iter().enumerate() {
@@ -260,11 +289,12 @@ pub fn solve_trial(
                     // Pose prior toward the warm start (scales keep the calibrated reference).
                     ctx.proxy.apply(&p, &mut y_warm, &mut dphi);
                     reference[..nq].copy_from_slice(&y_warm[..nq]);
+                    fold_tracking_reference(&mut reference, &track_w, &coord_ref, &coord_w);
                     let frame = FrameProblem {
                         observed: o,
                         marker_weights: &ctx.marker_weights,
                         tracking_ref: &reference,
-                        tracking_weights: &track_w,
+                        tracking_weights: &track_w_all,
                     };
                     let stats = if prev.is_none() {
                         first_frame(&mut solver, &frame, &mut p, &calibration.proxies)
@@ -317,6 +347,9 @@ pub fn solve_trial(
             (None, None) => calibration.proxies.clone(),
         };
     }
+    let names: Vec<&str> = ctx.model.markers.iter().map(|m| m.name.as_str()).collect();
+    let renamed = matched.renamed(&names, &trial.labels).into_iter().map(|(a, b)| (a.into(), b.into())).collect();
+    let gaps = gap_stats(ctx, trial, map, bridged.len());
     Ok(TrialResult {
         name: name.into(),
         proxies,
@@ -324,8 +357,10 @@ pub fn solve_trial(
         frame_seconds,
         calibration: calibration.clone(),
         bridged,
-        unmatched_model,
-        unmatched_trial,
+        unmatched_model: matched.unmatched_model.clone(),
+        unmatched_trial: matched.unmatched_trial.clone(),
+        renamed,
+        gaps,
         wall_seconds: start.elapsed().as_secs_f64(),
         threads,
     })
