@@ -1,7 +1,9 @@
 //! From files to results: the subject context (model, profile, settings), solving whole trials
-//! (calibration, warm-started frames, gap bridging, segments in parallel) and reports.
+//! (calibration, warm-started frames, gap bridging, segments in parallel), reports, and export to
+//! OpenSim (`.mot` motions, scaled `.osim` models).
 
 pub mod context;
+pub mod export;
 pub mod report;
 pub mod stats;
 pub mod trial;
