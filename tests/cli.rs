@@ -185,7 +185,7 @@ fn solves_an_opensim_model_with_a_marker_set_and_a_static_trial() {
         eprintln!("skipped: {} is absent", d.display());
         return;
     }
-    let report = tmp("gait2354.json");
+    let (report, mots, scaled) = (tmp("gait2354.json"), tmp("gait2354_mot"), tmp("subject01.osim"));
     let path = |f: &str| d.join(f).to_str().unwrap().to_string();
     let o = smocap(&[
         "solve",
@@ -198,11 +198,54 @@ fn solves_an_opensim_model_with_a_marker_set_and_a_static_trial() {
         &path("subject01_walk1.trc"),
         "--report-json",
         report.to_str().unwrap(),
+        "--mot-dir",
+        mots.to_str().unwrap(),
+        "--scaled-model",
+        scaled.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     assert_eq!(v["trials"][0]["frames"], 151);
     assert!(v["trials"][0]["marker_rmse_mm"]["p50"].as_f64().unwrap() < 60.0);
+    // OpenSim outputs: the motion has OpenSim's own IK columns; the subject keeps the marker set.
+    let mot = smocap::io::sto::read_sto(&mots.join("subject01_walk1.mot")).expect("motion");
+    assert_eq!(mot.rows.len(), 151);
+    let reference = d.join("../../shared/reference/opensim-4.6/gait2354_subject01/subject01_walk1_ik.mot");
+    if let Ok(ik) = smocap::io::sto::read_sto(&reference) {
+        assert_eq!(mot.columns, ik.columns);
+    }
+    let (subject, _) = smocap::io::osim::read_osim(&scaled).expect("scaled model re-imports");
+    let set = smocap::io::osim::read_marker_set(std::path::Path::new(&path("gait2354_Scale_MarkerSet.xml")), &subject)
+        .expect("marker set");
+    let names = |m: &[smocap::model::Marker]| m.iter().map(|x| x.name.clone()).collect::<Vec<_>>();
+    assert_eq!(names(&subject.markers), names(&set));
+    assert!(scaled.with_extension("scaleset.xml").exists());
+}
+
+#[test]
+fn solve_writes_a_motion_per_trial_and_the_generated_subject_model() {
+    let (trc, mots, scaled) = (tmp("export.trc"), tmp("export_mot"), tmp("export_subject.osim"));
+    let truth = tmp("export.json");
+    let args =
+        ["synth", "--frames", "30", "--seed", "9", "--out", trc.to_str().unwrap(), "--truth", truth.to_str().unwrap()];
+    let o = smocap(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = smocap(&[
+        "solve",
+        trc.to_str().unwrap(),
+        "--mot-dir",
+        mots.to_str().unwrap(),
+        "--scaled-model",
+        scaled.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mot = smocap::io::sto::read_sto(&mots.join("export.mot")).expect("motion");
+    assert_eq!(mot.rows.len(), 30);
+    assert_eq!(mot.in_degrees(), Some(true));
+    let ctx = smocap::pipeline::Context::shipped().unwrap();
+    assert_eq!(mot.columns.len(), 1 + ctx.model.nq());
+    let (subject, _) = smocap::io::osim::read_osim(&scaled).expect("generated model re-imports");
+    assert_eq!((subject.nb(), subject.markers.len()), (ctx.model.nb(), ctx.model.markers.len()));
 }
 
 fn shared(rel: &str) -> Option<PathBuf> {

@@ -7,11 +7,9 @@ use smocap::io::osim::{parse_marker_set, parse_osim, read_osim, simm_spline};
 use smocap::io::sto::read_sto;
 use smocap::kinematics::cpu::{forward, Workspace};
 use smocap::model::{CoordinateKind, Function, Model};
-use std::path::{Path, PathBuf};
 
-fn shared(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared").join(rel)
-}
+mod common;
+use common::{scale_set, shared};
 
 /// Max marker error (m) of our FK at the IK coordinates against OpenSim's marker locations.
 fn fk_oracle(model_rel: &str, mot_rel: &str, sto_rel: &str) -> f64 {
@@ -82,20 +80,6 @@ fn rajagopal_marker_positions_match_opensim_fk() {
     );
     println!("rajagopal max marker error: {:.3e} mm", e * 1e3);
     assert!(e <= 1e-5, "max marker error {} mm", e * 1e3);
-}
-
-/// Reads `<Scale><scales>x y z</scales><segment>name</segment>` entries.
-fn scale_set(path: &Path) -> Vec<(String, [f64; 3])> {
-    let text = std::fs::read_to_string(path).expect("scale set");
-    let doc = roxmltree::Document::parse(&text).expect("xml");
-    doc.descendants()
-        .filter(|n| n.has_tag_name("Scale"))
-        .map(|n| {
-            let get = |t: &str| n.children().find(|c| c.has_tag_name(t)).and_then(|c| c.text()).unwrap_or("").trim();
-            let v: Vec<f64> = get("scales").split_whitespace().map(|s| s.parse().expect("number")).collect();
-            (get("segment").to_string(), [v[0], v[1], v[2]])
-        })
-        .collect()
 }
 
 fn world_points(model: &Model, y: &[f64]) -> Vec<(String, nalgebra::Vector3<f64>)> {

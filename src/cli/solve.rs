@@ -56,6 +56,14 @@ pub struct SolveArgs {
     /// Length units of the marker files, overriding their headers.
     #[arg(long, value_enum)]
     pub units: Option<crate::pipeline::convention::Units>,
+    /// Write each solved trial's coordinates as an OpenSim motion `<trial stem>.mot` into this
+    /// directory (rotations in degrees, translations in metres).
+    #[arg(long)]
+    pub mot_dir: Option<PathBuf>,
+    /// Write the calibrated subject as an OpenSim model (`.osim`: the `--model` .osim file
+    /// rescaled, or the model generated), and its scale set beside it (`.scaleset.xml`).
+    #[arg(long)]
+    pub scaled_model: Option<PathBuf>,
 }
 
 /// Applies `--ik-setup` to the context, printing what it did.
@@ -170,6 +178,7 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
             ctx = ctx.with_marker_offsets(offsets)?;
         }
     }
+    let mut solved = Vec::new();
     for (name, t, conv) in &loaded {
         let result = match &calibration {
             Some(Ok(c)) => solve_trial(&ctx, name, t, c, threads).map_err(|e| e.to_string()),
@@ -189,6 +198,7 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
                 let mut tr = trial_report(&ctx, &r, truth.as_ref());
                 tr.input = Some(conv.clone());
                 report.push(tr);
+                solved.push((t, r));
             }
             Err(e) => report.push(Report::failed(name, e)),
         }
@@ -198,6 +208,7 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         std::fs::write(path, serde_json::to_string_pretty(&report)?)
             .with_context(|| format!("writing {}", path.display()))?;
     }
+    export(&a, &ctx, &solved, calibration.as_ref().and_then(|c| c.as_ref().ok()))?;
     let failed = report.trials.iter().filter(|t| t.status != "ok").count();
     if failed > 0 {
         eprintln!("{failed} of {} trials failed", report.trials.len());
@@ -210,4 +221,37 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         return Ok(super::EXIT_SOME_FAILED);
     }
     Ok(0)
+}
+
+/// Writes the OpenSim outputs asked for: one `.mot` per solved trial, the scaled model.
+fn export(
+    a: &SolveArgs,
+    ctx: &crate::pipeline::Context,
+    solved: &[(&crate::io::MarkerTrial, crate::pipeline::TrialResult)],
+    calibration: Option<&crate::solve::Calibration>,
+) -> anyhow::Result<()> {
+    use crate::pipeline::export::{write_mot, write_scaled_model};
+    if let Some(dir) = &a.mot_dir {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let mut written = std::collections::HashSet::new();
+        for (trial, r) in solved {
+            let stem = std::path::Path::new(&r.name).file_stem().map_or("trial".into(), |s| s.to_string_lossy());
+            let path = dir.join(format!("{stem}.mot"));
+            anyhow::ensure!(written.insert(path.clone()), "--mot-dir: two trials would both write {}", path.display());
+            write_mot(ctx, r, trial, &path)?;
+            eprintln!("wrote {}", path.display());
+        }
+    }
+    match (&a.scaled_model, calibration) {
+        (Some(out), Some(c)) => {
+            let (warnings, set) = write_scaled_model(ctx, c, a.model.as_deref(), out)?;
+            for w in warnings {
+                eprintln!("note: {w}");
+            }
+            eprintln!("wrote {} and {}", out.display(), set.display());
+        }
+        (Some(out), None) => eprintln!("{}: not written: no calibrated subject", out.display()),
+        (None, _) => {}
+    }
+    Ok(())
 }

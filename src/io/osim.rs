@@ -1,5 +1,7 @@
 //! OpenSim model import (`.osim`, format version 4: `<OpenSimDocument Version="4xxxx">`) into a
-//! [`Model`], and OpenSim marker-set files.
+//! [`Model`], and OpenSim marker-set files; export of a scaled subject: [`scale_osim`] rewrites
+//! the model's own file with scale factors as OpenSim's ScaleTool does, [`format_osim`] writes any
+//! [`Model`] (e.g. one read from MJCF) as a new `.osim` file.
 //!
 //! How OpenSim maps onto our conventions (SI: metres, radians; sources in OpenSim 4 / Simbody):
 //! - Bodies: `BodySet` bodies, attached in topological order (parents first, then file order);
@@ -36,16 +38,22 @@
 //! - Everything else (forces, contact geometry, controllers, probes, other constraints) is
 //!   ignored with one warning per component type.
 
+mod export;
 mod func;
 pub mod ik_setup;
 mod joints;
 mod markers;
+mod scale;
 mod scale_setup;
 mod xml;
 
+pub use export::{
+    format_osim, format_scale_set, OsimWriteError, GENERATED_GRAVITY, PLACEHOLDER_INERTIA, PLACEHOLDER_MASS,
+};
 pub use func::simm_spline;
 pub use ik_setup::{parse_ik_setup, read_ik_setup, IkSetup};
 pub use markers::{parse_marker_set, read_marker_set};
+pub use scale::{scale_inertia, scale_osim, MassScaling};
 pub use scale_setup::{parse_scale_setup, read_scale_setup, ScaleSetup};
 
 use crate::model::{Body, Coordinate, CoordinateCoupling, Function, Marker, Model, ModelError, Motion, MotionKind};

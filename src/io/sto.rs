@@ -1,5 +1,6 @@
 //! OpenSim `.sto` / `.mot` tables: a header ending in `endheader`, a tab-separated row of column
-//! names, then rows of numbers (the first column is usually `time`).
+//! names, then rows of numbers (the first column is usually `time`). Read with [`read_sto`],
+//! written with [`write_sto`] (OpenSim 4 storage format, as its tools write `.mot` files).
 
 use std::path::Path;
 
@@ -36,6 +37,8 @@ pub enum StoError {
     Io { file: String, source: std::io::Error },
     #[error("{file}:{line}: {message}")]
     Parse { file: String, line: usize, message: String },
+    #[error("{file}: cannot write: {source}")]
+    Write { file: String, source: std::io::Error },
 }
 
 /// Reads an `.sto` / `.mot` file.
@@ -78,4 +81,55 @@ pub fn parse_sto(text: &str, file_name: &str) -> Result<Table, StoError> {
         table.rows.push(row);
     }
     Ok(table)
+}
+
+/// Formats a table in OpenSim 4 storage format: the table `name` line, `version=1`, `nRows=`,
+/// `nColumns=`, the other header entries (e.g. `inDegrees=yes`; any `version`, `nRows` or
+/// `nColumns` of `table.header` are replaced), `endheader`, the tab-separated column names, then
+/// one tab-separated line per row. Numbers are written so that they read back exactly.
+pub fn format_sto(name: &str, table: &Table) -> String {
+    use std::fmt::Write as _;
+    let mut out = String::with_capacity(64 + table.rows.len() * table.columns.len() * 12);
+    let name = name.lines().next().unwrap_or("").trim();
+    let _ = write!(out, "{}\nversion=1\nnRows={}\nnColumns={}\n", name, table.rows.len(), table.columns.len());
+    for (k, v) in &table.header {
+        if !["version", "nRows", "nColumns"].contains(&k.as_str()) {
+            let _ = writeln!(out, "{k}={v}");
+        }
+    }
+    out.push_str("endheader\n");
+    out.push_str(&table.columns.join("\t"));
+    out.push('\n');
+    for row in &table.rows {
+        for (i, v) in row.iter().enumerate() {
+            if i > 0 {
+                out.push('\t');
+            }
+            push_number(&mut out, *v);
+        }
+        out.push('\n');
+    }
+    out
+}
+
+/// Writes [`format_sto`] to `path`.
+pub fn write_sto(path: &Path, name: &str, table: &Table) -> Result<(), StoError> {
+    std::fs::write(path, format_sto(name, table))
+        .map_err(|source| StoError::Write { file: path.display().to_string(), source })
+}
+
+/// Appends `v` in the shortest form that reads back exactly, with an exponent only for very small
+/// or very large magnitudes (`NaN` as `NaN`, as OpenSim writes it).
+pub(crate) fn push_number(out: &mut String, v: f64) {
+    use std::fmt::Write as _;
+    let a = v.abs();
+    let _ = if v.is_nan() {
+        write!(out, "NaN")
+    } else if v.is_infinite() {
+        write!(out, "{}", if v > 0.0 { "Inf" } else { "-Inf" })
+    } else if a == 0.0 || (1e-5..1e15).contains(&a) {
+        write!(out, "{v}")
+    } else {
+        write!(out, "{v:e}")
+    };
 }

@@ -1,8 +1,10 @@
 //! From files to results: the subject context (model, profile, settings), solving whole trials
-//! (calibration, warm-started frames, gap bridging, segments in parallel) and reports.
+//! (calibration, warm-started frames, gap bridging, segments in parallel), reports, and export to
+//! OpenSim (`.mot` motions, scaled `.osim` models).
 
 pub mod context;
 pub mod convention;
+pub mod export;
 pub mod ik_tasks;
 pub mod matching;
 pub mod report;

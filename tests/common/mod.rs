@@ -133,3 +133,22 @@ pub fn random_state(model: &Model, seed: u64) -> Vec<f64> {
     }
     y
 }
+
+/// A path under the shared data folder beside the repository (`../shared/<rel>`).
+pub fn shared(rel: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared").join(rel)
+}
+
+/// Reads an OpenSim `ScaleSet` file: `<Scale><scales>x y z</scales><segment>name</segment>` entries.
+pub fn scale_set(path: &std::path::Path) -> Vec<(String, [f64; 3])> {
+    let text = std::fs::read_to_string(path).expect("scale set");
+    let doc = roxmltree::Document::parse(&text).expect("xml");
+    doc.descendants()
+        .filter(|n| n.has_tag_name("Scale"))
+        .map(|n| {
+            let get = |t: &str| n.children().find(|c| c.has_tag_name(t)).and_then(|c| c.text()).unwrap_or("").trim();
+            let v: Vec<f64> = get("scales").split_whitespace().map(|s| s.parse().expect("number")).collect();
+            (get("segment").to_string(), [v[0], v[1], v[2]])
+        })
+        .collect()
+}
