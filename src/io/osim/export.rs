@@ -105,7 +105,7 @@ pub fn format_osim(model: &Model, scales: &[Vector3<f64>]) -> Result<(String, Ve
     w.line(2, r#"<MarkerSet name="markerset">"#);
     w.line(3, "<objects>");
     for m in &model.markers {
-        marker(&mut w, 4, &m.name, &model.bodies[m.body].name, &scales[m.body].component_mul(&m.offset));
+        marker(&mut w, 4, &m.name, &model.bodies[m.body].name, &scales[m.body].component_mul(&m.offset), m.fixed);
     }
     w.line(3, "</objects>");
     w.line(3, "<groups />");
@@ -144,11 +144,11 @@ pub fn format_scale_set(model: &Model, scales: &[Vector3<f64>]) -> String {
 }
 
 /// Writes one `<Marker>` element (location in the body frame, m).
-pub(super) fn marker(w: &mut Writer, depth: usize, name: &str, body: &str, location: &Vector3<f64>) {
+pub(super) fn marker(w: &mut Writer, depth: usize, name: &str, body: &str, location: &Vector3<f64>, fixed: bool) {
     w.line(depth, &format!(r#"<Marker name="{}">"#, esc(name)));
     w.line(depth + 1, &format!("<socket_parent_frame>/bodyset/{}</socket_parent_frame>", esc(body)));
     w.line(depth + 1, &format!("<location>{}</location>", vec3(location)));
-    w.line(depth + 1, "<fixed>false</fixed>");
+    w.line(depth + 1, &format!("<fixed>{fixed}</fixed>"));
     w.line(depth, "</Marker>");
 }
 

@@ -380,7 +380,7 @@ impl<'a> Scaler<'a, '_> {
                     let loc = format!("<location>{}</location>", vec3(&loc));
                     w.line(4, &format!("{}{loc}{}", &t[r.start..lr.start], &t[lr.end..r.end]));
                 }
-                None => marker(&mut w, 4, &mk.name, body, &loc),
+                None => marker(&mut w, 4, &mk.name, body, &loc, mk.fixed),
             }
         }
         let mut dropped = 0;
