@@ -15,18 +15,25 @@
 //!   translation1-3 first, then rotation1-3. Constant-zero axes are dropped. Collinear axes are
 //!   an error (as `CustomJoint::extendFinalizeFromProperties`). An axis without function gets
 //!   `f(q) = q` with one coordinate, constant 0 with none (`SpatialTransform::connectToJoint`).
-//! - Scaling (`SpatialTransform::scale`): every translation function except `LinearFunction`
-//!   `1 0` is multiplied by `axis · s_parent`. We set `parent_scale_weights = axis / (axis·1)`
-//!   so the unscaled model is unchanged (identical to OpenSim for axes along +x/+y/+z; OpenSim
-//!   itself rescales by `axis·1` even at unit scale).
+//! - Scaling (`SpatialTransform::scale`, OpenSim ≥ 4.5): every translation function except
+//!   `LinearFunction` `1 0` (constants and slope −1 included) is multiplied by
+//!   `|axis| · s_parent` (sign ignored, OpenSim issue #3991). We set `parent_scale_weights =
+//!   |axis| / Σ|axisᵢ|`, so the unscaled model is unchanged: identical to OpenSim for axes along
+//!   ±x/±y/±z; for an oblique axis OpenSim's factor is `Σ|axisᵢ|` (e.g. 1.4) even at unit scale,
+//!   and ours is that much smaller at every scale (`tests/io_osim_joints.rs` shows both).
 //! - Other joints (Simbody mobilizers, Euler angles as OpenSim uses them): `PinJoint` rotation
 //!   about z; `SliderJoint` translation along x; `UniversalJoint` rotations x, y; `GimbalJoint`
 //!   and `BallJoint` rotations x, y, z (body-fixed); `FreeJoint` coordinates rx ry rz tx ty tz,
 //!   motions: translations x, y, z then rotations x, y, z; `WeldJoint` none.
+//! - Every joint type, offset frames (translated and rotated), spline/linear/constant
+//!   translations, a coordinate coupler and non-uniform `Model::scale` are checked against
+//!   OpenSim 4.6's own FK to 1e-14 m (`tests/io_osim_joints.rs`, fixture made by
+//!   `scripts/gen_osim_joint_fixture.py`).
 //! - Coordinates: `default_value`, `range` (±∞ when absent), `clamped`, `locked`. The kind
-//!   follows OpenSim's `MotionType` (`CustomJoint::constructCoordinates`): an axis driven by
-//!   `LinearFunction` with slope ±1 makes it rotational / translational; otherwise ("coupled")
-//!   rotational if it drives any rotation axis, else translational.
+//!   follows OpenSim's `MotionType` (`CustomJoint::constructCoordinates`): over the axes in
+//!   OpenSim's order (rotation1 … translation3), the last one driven by a `LinearFunction` of
+//!   slope ±1 makes it rotational / translational; without one ("coupled") it is rotational if
+//!   it drives any rotation axis, else translational.
 //! - Functions: `Constant`, `LinearFunction`, `PolynomialFunction` (highest power first),
 //!   `NaturalCubicSpline`, `PiecewiseLinearFunction`, `MultiplierFunction`, and `SimmSpline` with
 //!   SIMM's own end conditions ([`simm_spline`]).
@@ -165,6 +172,9 @@ struct Axis {
     coordinate: Option<usize>,
     func: Function,
     weights: Option<Vector3<f64>>,
+    /// Position in OpenSim's own axis order (`rotation1` … `translation3` for a `CustomJoint`),
+    /// which decides a coordinate's motion type.
+    order: usize,
 }
 
 impl<'c, 'a> Builder<'c, 'a> {
@@ -373,15 +383,10 @@ impl<'c, 'a> Builder<'c, 'a> {
     }
 }
 
-/// `parent_scale_weights` for a scaled translation axis: `axis / (axis·1)` (see module docs).
+/// `parent_scale_weights` for a scaled translation axis: `|axis| / Σ|axisᵢ|` (see module docs).
 fn scale_weights(axis: Vector3<f64>) -> Vector3<f64> {
-    let sum = axis.sum();
-    if sum.abs() > 1e-9 {
-        axis / sum
-    } else {
-        let a = axis.abs();
-        a / a.sum().max(1e-300)
-    }
+    let a = axis.abs();
+    a / a.sum().max(1e-300)
 }
 
 /// Rotation from body-fixed X-Y-Z Euler angles (Simbody `setRotationToBodyFixedXYZ`).

@@ -44,12 +44,14 @@ impl<'c, 'a> Builder<'c, 'a> {
                 .collect();
             let axes = seq
                 .into_iter()
-                .map(|(kind, axis, c)| Axis {
+                .enumerate()
+                .map(|(order, (kind, axis, c))| Axis {
                     kind,
                     axis,
                     coordinate: Some(c),
                     func: Function::IDENTITY,
                     weights: None,
+                    order,
                 })
                 .collect();
             (names, axes)
@@ -66,9 +68,14 @@ impl<'c, 'a> Builder<'c, 'a> {
                 return Err(self.ctx.err(j, format!("duplicate coordinate name '{name}'")));
             }
             let node = declared.iter().find(|c| c.attribute("name") == Some(name.as_str())).copied();
+            // As `CustomJoint::constructCoordinates`: over the axes in OpenSim's order, the last
+            // pure one (LinearFunction of slope ±1) decides; without one the coordinate is
+            // "Coupled", which we call rotational when it drives a rotation.
             let mut pure = None;
             let mut rotates = false;
-            for a in axes.iter().filter(|a| a.coordinate == Some(i)) {
+            let mut driven: Vec<&Axis> = axes.iter().filter(|a| a.coordinate == Some(i)).collect();
+            driven.sort_by_key(|a| a.order);
+            for a in driven {
                 rotates |= a.kind == MotionKind::Rotation;
                 if matches!(a.func, Function::Linear { slope, .. } if slope.abs() == 1.0) {
                     pure = Some(a.kind);
@@ -169,7 +176,7 @@ impl<'c, 'a> Builder<'c, 'a> {
             let translation = i >= 3;
             let weights = (translation && func != Function::IDENTITY).then(|| scale_weights(axis));
             let kind = if translation { MotionKind::Translation } else { MotionKind::Rotation };
-            axes.push(Axis { kind, axis, coordinate, func, weights });
+            axes.push(Axis { kind, axis, coordinate, func, weights, order: i });
         }
         Ok((names, axes))
     }
