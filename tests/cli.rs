@@ -418,3 +418,60 @@ fn y_up_prefixed_data_solve_like_the_original_z_up_data() {
         stderr(&o)
     );
 }
+
+#[test]
+fn a_scale_setup_supplies_groups_marker_set_static_trial_and_placement() {
+    let (Some(model), Some(setup), Some(ik), Some(walk)) = (
+        shared("datasets/gait2354_subject01/gait2354_simbody.osim"),
+        shared("datasets/gait2354_subject01/subject01_Setup_Scale.xml"),
+        shared("datasets/gait2354_subject01/subject01_Setup_IK.xml"),
+        shared("datasets/gait2354_subject01/subject01_walk1.trc"),
+    ) else {
+        return;
+    };
+    let report = tmp("scale-setup.json");
+    // No --markerset, no --static: both come from the setup.
+    let o = smocap(&[
+        "solve",
+        "--model",
+        model.to_str().unwrap(),
+        "--scale-setup",
+        setup.to_str().unwrap(),
+        "--ik-setup",
+        ik.to_str().unwrap(),
+        "--report-json",
+        report.to_str().unwrap(),
+        walk.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("patella_r"), "bodies the model lacks are named: {}", stderr(&o));
+    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(r["settings"]["marker_placement"], true);
+    let t = &r["trials"][0];
+    // The setup's groups: both femurs share one factor (measurement "thigh"), the torso its own.
+    assert_eq!(t["scale"]["femur_r"], t["scale"]["femur_l"]);
+    assert_ne!(t["scale"]["femur_r"], t["scale"]["torso"]);
+    let mean = t["marker_rmse_mm"]["mean"].as_f64().unwrap();
+    assert!(mean < 25.0, "mean marker RMSE {mean} mm");
+}
+
+#[test]
+fn a_scale_setup_naming_a_missing_static_trial_asks_for_static() {
+    let (Some(model), Some(setup), Some(walk)) = (
+        shared("datasets/rajagopal2016_walk/Rajagopal2016.osim"),
+        shared("datasets/rajagopal2016_walk/scale_setup_walk_scaleOnly.xml"),
+        shared("datasets/rajagopal2016_walk/motion_capture_walk.trc"),
+    ) else {
+        return;
+    };
+    let o = smocap(&[
+        "solve",
+        "--model",
+        model.to_str().unwrap(),
+        "--scale-setup",
+        setup.to_str().unwrap(),
+        walk.to_str().unwrap(),
+    ]);
+    assert_clean_failure(&o, "--static");
+    assert!(stderr(&o).contains("static_walk_1.trc"), "{}", stderr(&o));
+}

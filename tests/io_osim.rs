@@ -287,3 +287,43 @@ fn mutated_files_never_panic() {
     }
     assert!(parsed > 0);
 }
+
+#[test]
+fn scale_setup_groups_follow_measurements_and_equal_manual_factors() {
+    let path = shared("datasets/rajagopal2016_walk/scale_setup_walk_scaleOnly.xml");
+    if !path.exists() {
+        return;
+    }
+    let s = smocap::io::osim::read_scale_setup(&path).expect("setup");
+    assert!(s.place_markers);
+    assert_eq!(s.mass_kg.map(|m| (m * 100.0).round()), Some(8507.0));
+    let group = |body: &str| s.scale_groups.iter().find(|g| g.bodies.iter().any(|b| b == body)).expect(body);
+    use smocap::model::profile::ScaleAxes;
+    // PelvisX/Y/Z measure one axis each: one group, per-axis factors.
+    assert_eq!(group("pelvis").bodies, ["pelvis"]);
+    assert_eq!(group("pelvis").axes, ScaleAxes::Xyz);
+    // footX/Y/Z cover six bodies on both sides.
+    assert_eq!(group("calcn_r").bodies.len(), 6);
+    assert_eq!(group("calcn_r").axes, ScaleAxes::Xyz);
+    // Manual factors: equal uniform factors share a group (femurs and patellae at 0.958) …
+    let thigh = group("femur_r");
+    assert!(["femur_l", "patella_r", "patella_l"].iter().all(|b| thigh.bodies.iter().any(|x| x == b)));
+    assert_eq!(thigh.axes, ScaleAxes::Uniform);
+    // … and unequal per-axis ones give the body its own per-axis group.
+    assert_eq!(group("torso").bodies, ["torso"]);
+    assert_eq!(group("torso").axes, ScaleAxes::Xyz);
+    // Bodies named nowhere (the hands) keep scale 1: no group.
+    assert!(s.scale_groups.iter().all(|g| !g.bodies.iter().any(|b| b == "hand_r")));
+}
+
+#[test]
+fn a_scale_setup_that_is_not_one_is_an_error_saying_so() {
+    let err = smocap::io::osim::parse_scale_setup(
+        "<OpenSimDocument><IKTool/></OpenSimDocument>",
+        "x.xml",
+        std::path::Path::new(""),
+    )
+    .expect_err("not a scale setup")
+    .to_string();
+    assert!(err.contains("x.xml") && err.contains("ScaleTool"), "{err}");
+}

@@ -190,3 +190,53 @@ fn a_frame_far_from_its_warm_start_is_not_declared_converged_by_a_box_limited_st
     let st = solver.solve(&frame, &mut p);
     assert!(st.rmse_m < 1e-3, "RMSE {} m, status {:?}, {} iterations", st.rmse_m, st.status, st.iterations);
 }
+
+#[path = "common/mod.rs"]
+mod common;
+
+#[test]
+fn marker_placement_moves_free_markers_onto_their_observations_and_keeps_fixed_ones() {
+    use rand::RngExt;
+    use smocap::kinematics::cpu::{forward, Workspace};
+    use smocap::model::profile::Profile;
+    use smocap::model::proxy::ProxyMap;
+    let model = common::random_model(11, 6);
+    let proxy = ProxyMap::new(&model, &Profile::default_for(&model)).expect("proxy map");
+    let mut r = common::rng(5);
+    // Where the markers really are: each moved by up to 3 cm in its body frame.
+    let mut real = model.clone();
+    for m in &mut real.markers {
+        m.offset += nalgebra::Vector3::from_fn(|_, _| r.random_range(-0.03..0.03));
+    }
+    let movable: Vec<bool> = (0..model.markers.len()).map(|m| m % 3 != 0).collect();
+    let (mut frames, mut poses) = (Vec::new(), Vec::new());
+    let mut ws = Workspace::new(&real);
+    for _ in 0..4 {
+        let p: Vec<f64> = proxy
+            .proxies
+            .iter()
+            .map(|px| {
+                let (lo, hi) = (px.range.0.max(-1.0), px.range.1.min(1.2));
+                r.random_range(lo..hi)
+            })
+            .collect();
+        forward(&real, &proxy.state(&p), &mut ws);
+        frames.push(ws.markers.clone());
+        poses.push(p);
+    }
+    let slices: Vec<&[f64]> = frames.iter().map(|f| f.as_slice()).collect();
+    let placed = smocap::solve::placement::place_markers(&model, &proxy, &slices, &poses, &movable);
+    for (m, p) in placed.iter().enumerate() {
+        match p {
+            Some(o) => {
+                assert!(movable[m]);
+                assert!(
+                    (o - real.markers[m].offset).norm() < 1e-9,
+                    "marker {m} placed at {o} not {}",
+                    real.markers[m].offset
+                );
+            }
+            None => assert!(!movable[m], "movable marker {m} observed in every frame was not placed"),
+        }
+    }
+}
