@@ -35,6 +35,7 @@ pub enum Command {
 
 /// Runs the command line; errors are printed with their causes.
 pub fn main() -> ExitCode {
+    restore_sigpipe();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Demo(a) => demo::run(a),
@@ -92,4 +93,15 @@ pub(crate) fn load_context_with_markers(
 /// Default thread count: the machine's available parallelism.
 pub(crate) fn default_threads() -> usize {
     std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+}
+
+/// Output piped into a reader that stops early (`smocap markers F | head`) ends the process
+/// quietly, as other command-line tools do, instead of `println!` panicking on a broken pipe
+/// (Rust ignores SIGPIPE by default).
+fn restore_sigpipe() {
+    #[cfg(unix)]
+    // SAFETY: called first thing in main, before any thread exists; SIG_DFL is a valid handler.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
 }
