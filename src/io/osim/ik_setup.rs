@@ -105,7 +105,9 @@ pub fn parse_ik_setup(text: &str, file_name: &str) -> Result<IkSetup, OsimError>
     Ok(setup)
 }
 
-fn read_task<'a>(
+/// Reads one `IKMarkerTask` / `IKCoordinateTask` into `setup` (also used for the tasks of a Scale
+/// setup's `MarkerPlacer`).
+pub(super) fn read_task<'a>(
     ctx: &mut Ctx<'a>,
     doc: &roxmltree::Document,
     task: Node<'a, 'a>,

@@ -11,6 +11,7 @@
 //! smocap estimates the factors of those groups from the markers (jointly with the pose), rather
 //! than from marker-pair distances or manual values; the groups are what is kept.
 
+use super::ik_setup::{read_task, IkSetup};
 use super::xml::{child, elements, set_objects, Ctx};
 use super::{parse_xml, OsimError};
 use crate::model::profile::{ScaleAxes, ScaleGroup};
@@ -44,7 +45,7 @@ pub fn read_scale_setup(path: &Path) -> Result<ScaleSetup, OsimError> {
 /// Parses Scale tool setup text; relative file names resolve against `base`.
 pub fn parse_scale_setup(text: &str, file_name: &str, base: &Path) -> Result<ScaleSetup, OsimError> {
     let doc = parse_xml(text, file_name)?;
-    let ctx = Ctx::new(&doc, file_name);
+    let mut ctx = Ctx::new(&doc, file_name);
     let root = doc.root_element();
     let tool = if root.has_tag_name("ScaleTool") { Some(root) } else { child(root, "ScaleTool") };
     let Some(tool) = tool else {
@@ -62,16 +63,12 @@ pub fn parse_scale_setup(text: &str, file_name: &str, base: &Path) -> Result<Sca
     if let Some(placer) = child(tool, "MarkerPlacer") {
         out.place_markers = ctx.boolean(placer, "apply")?.unwrap_or(true);
         out.static_file = ctx.text(placer, "marker_file").and_then(|(_, t)| resolve(t));
-        for task in set_objects(placer, "IKTaskSet").into_iter().filter(|t| t.has_tag_name("IKMarkerTask")) {
-            let Some(name) = task.attribute("name") else {
-                return Err(ctx.err(task, "marker task without a name"));
-            };
-            let apply = ctx.boolean(task, "apply")?.unwrap_or(true);
-            let weight = ctx.scalar(task, "weight")?.unwrap_or(1.0);
-            if !(weight.is_finite() && weight >= 0.0) {
-                return Err(ctx.err(task, format!("weight {weight}: weights must be finite and ≥ 0")));
-            }
-            out.static_weights.insert(name.to_string(), if apply { weight } else { 0.0 });
+        let mut tasks = IkSetup::default();
+        for task in set_objects(placer, "IKTaskSet") {
+            read_task(&mut ctx, &doc, task, &mut tasks)?;
+        }
+        for t in tasks.marker_tasks {
+            out.static_weights.insert(t.name, if t.apply { t.weight } else { 0.0 });
         }
     }
     Ok(out)
