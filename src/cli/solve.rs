@@ -1,7 +1,7 @@
 //! `smocap solve`: calibrate a subject, then solve its trials.
 
 use crate::pipeline::report::{trial_report, Report};
-use crate::pipeline::{calibrate_subject, solve_trial};
+use crate::pipeline::{calibrate_subject, solve_trial_with};
 use crate::solve::QpBackend;
 use crate::synth::Truth;
 use anyhow::Context as _;
@@ -37,6 +37,8 @@ pub struct SolveArgs {
     /// Write the JSON report here.
     #[arg(long)]
     pub report_json: Option<PathBuf>,
+    #[command(flatten)]
+    pub backend: super::BackendArgs,
 }
 
 pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
@@ -65,7 +67,9 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         Some(p) => Some(crate::io::read_markers(p)?),
         None => None,
     };
+    let (mut chosen, lanes) = a.backend.choose(&ctx, threads)?;
     let mut report = Report::new(&ctx, threads);
+    report.set_backend(&chosen, lanes);
     let mut loaded = Vec::new();
     for p in &a.trials {
         let name = p.display().to_string();
@@ -82,7 +86,9 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         if calibration_input.is_empty() { None } else { Some(calibrate_subject(&ctx, &calibration_input)) };
     for (name, t) in &loaded {
         let result = match &calibration {
-            Some(Ok(c)) => solve_trial(&ctx, name, t, c, threads).map_err(|e| e.to_string()),
+            Some(Ok(c)) => {
+                solve_trial_with(&ctx, name, t, c, threads, lanes, chosen.backend()).map_err(|e| e.to_string())
+            }
             Some(Err(e)) => Err(format!("calibration failed: {e}")),
             None => Err("no calibration".into()),
         };

@@ -2,9 +2,11 @@
 //! (calibration, warm-started frames, gap bridging, segments in parallel) and reports.
 
 pub mod context;
+pub mod device;
+pub mod lanes;
 pub mod report;
 pub mod stats;
 pub mod trial;
 
 pub use context::{Context, ContextError};
-pub use trial::{calibrate_subject, solve_trial, TrialError, TrialResult};
+pub use trial::{calibrate_subject, solve_trial, solve_trial_with, TrialError, TrialResult};

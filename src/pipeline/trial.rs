@@ -3,14 +3,15 @@
 //! segments solved in parallel, each cold-started. Frames with too few markers are reported and
 //! bridged from their neighbours.
 
+use super::lanes::{run_lanes, TrialInputs};
 use super::Context;
 use crate::io::MarkerTrial;
 use crate::kinematics::assembly::FrameProblem;
+use crate::kinematics::backend::{BackendError, BatchBackend, CpuBackend};
 use crate::model::proxy::ProxyKind;
 use crate::solve::calibrate::track;
-use crate::solve::init::{cold_start, wrap_angle};
-use crate::solve::{calibrate, make_qp, Calibration, FrameSolver, FrameStats, FrameStatus, WarmStart};
-use rayon::prelude::*;
+use crate::solve::init::wrap_angle;
+use crate::solve::{calibrate, make_qp, Calibration, FrameSolver, FrameStats, FrameStatus};
 use std::time::Instant;
 
 /// Why a trial could not be solved.
@@ -22,6 +23,8 @@ pub enum TrialError {
     Empty { trial: String },
     #[error("trial '{trial}': no frame has at least {min} observed markers, nothing to calibrate on")]
     NothingToCalibrate { trial: String, min: usize },
+    #[error("trial '{trial}': evaluation backend failed: {source}")]
+    Backend { trial: String, source: BackendError },
 }
 
 /// Result of one trial.
@@ -141,8 +144,8 @@ fn no_match(ctx: &Context, name: &str, trial: &MarkerTrial) -> TrialError {
     }
 }
 
-/// Solves every frame of `trial` for a subject calibrated as `calibration`, using up to
-/// `threads` segments in parallel.
+/// Solves every frame of `trial` for a subject calibrated as `calibration` on the CPU backend,
+/// with `threads` worker threads and as many lanes.
 pub fn solve_trial(
     ctx: &Context,
     name: &str,
@@ -150,9 +153,24 @@ pub fn solve_trial(
     calibration: &Calibration,
     threads: usize,
 ) -> Result<TrialResult, TrialError> {
+    solve_trial_with(ctx, name, trial, calibration, threads, threads, None)
+}
+
+/// Solves every frame of `trial` with the lane scheduler ([`super::lanes`]): the trial is cut
+/// into at most `lanes` segments of at least 100 frames, each cold-started and walked by one
+/// lane; evaluations go to `backend` (the CPU backend when `None`), the QPs to a pool of
+/// `threads` threads.
+pub fn solve_trial_with(
+    ctx: &Context,
+    name: &str,
+    trial: &MarkerTrial,
+    calibration: &Calibration,
+    threads: usize,
+    lanes: usize,
+    backend: Option<&mut (dyn BatchBackend + '_)>,
+) -> Result<TrialResult, TrialError> {
     let start = Instant::now();
     let nm = ctx.model.markers.len();
-    let stride = 3 * nm;
     let (map, unmatched_model, unmatched_trial) = match_markers(ctx, trial);
     if map.iter().all(Option::is_none) {
         return Err(no_match(ctx, name, trial));
@@ -164,8 +182,8 @@ pub fn solve_trial(
     let settings = &ctx.settings;
     let eval = ctx.evaluator();
     let ny = ctx.model.ny();
-    let nq = ctx.model.nq();
     let np = ctx.proxy.np();
+    debug_assert_eq!(obs.len(), trial.n_frames() * 3 * nm);
 
     // Tracking: scales toward the calibration, coordinates weakly toward the warm start.
     let y_cal = ctx.proxy.state(&calibration.proxies);
@@ -182,65 +200,37 @@ pub fn solve_trial(
             neutral[k] = calibration.proxies[k];
         }
     }
-    // Segments solved in parallel.
+    // Segments, one lane each at a time.
     let n = trial.n_frames();
     let threads = threads.max(1);
-    let segments = threads.min(n.div_ceil(100)).max(1);
+    let lanes = lanes.max(1);
+    let segments = lanes.min(n.div_ceil(100)).max(1);
     let bounds: Vec<(usize, usize)> = (0..segments).map(|i| (i * n / segments, (i + 1) * n / segments)).collect();
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().ok();
-    let run = || {
-        bounds
-            .par_iter()
-            .map(|&(a, b)| {
-                let mut solver = FrameSolver::new(&eval, settings.clone(), make_qp(settings.qp));
-                let mut reference = y_cal.clone();
-                let (mut y_warm, mut dphi) = (vec![0.0; ny], vec![0.0; ctx.proxy.terms.len()]);
-                let mut out = Vec::with_capacity(b - a);
-                let mut prev: Option<Vec<f64>> = None;
-                let mut prev2: Option<Vec<f64>> = None;
-                for f in a..b {
-                    let t0 = Instant::now();
-                    let o = &obs[f * stride..(f + 1) * stride];
-                    let mut p = match (&prev, &prev2, settings.warm_start) {
-                        (Some(p1), Some(p2), WarmStart::Extrapolate) => {
-                            p1.iter().zip(p2).map(|(x1, x2)| 2.0 * x1 - x2).collect()
-                        }
-                        (Some(p1), _, _) => p1.clone(),
-                        // Cold start: the neutral pose at the calibrated morphology.
-                        (None, _, _) => neutral.clone(),
-                    };
-                    solver.clamp(&mut p);
-                    // Pose prior toward the warm start (scales keep the calibrated reference).
-                    ctx.proxy.apply(&p, &mut y_warm, &mut dphi);
-                    reference[..nq].copy_from_slice(&y_warm[..nq]);
-                    let frame = FrameProblem {
-                        observed: o,
-                        marker_weights: &ctx.marker_weights,
-                        tracking_ref: &reference,
-                        tracking_weights: &track_w,
-                    };
-                    if prev.is_none() {
-                        cold_start(&mut solver, &frame, &mut p);
-                    }
-                    let stats = solver.solve(&frame, &mut p);
-                    let ok = stats.status != FrameStatus::TooFewMarkers;
-                    out.push((p.clone(), stats, t0.elapsed().as_secs_f64()));
-                    if ok {
-                        prev2 = prev.replace(p);
-                    }
-                }
-                out
-            })
-            .collect::<Vec<_>>()
+    let inputs = TrialInputs {
+        observed: &obs,
+        marker_weights: &ctx.marker_weights,
+        reference: &y_cal,
+        tracking_weights: &track_w,
+        neutral: &neutral,
     };
-    let pieces = match &pool {
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().ok();
+    let run = || match backend {
+        Some(b) => run_lanes(&eval, settings, &inputs, &bounds, lanes, b),
+        None => {
+            let mut cpu = CpuBackend::new(eval.clone());
+            run_lanes(&eval, settings, &inputs, &bounds, lanes, &mut cpu)
+        }
+    };
+    let solved = match &pool {
         Some(pool) => pool.install(run),
         None => run(),
-    };
+    }
+    .map_err(|e| TrialError::Backend { trial: name.into(), source: e })?;
+    let pieces = solved.into_iter().map(|r| r.expect("every frame lies in one segment"));
     let mut proxies = Vec::with_capacity(n);
     let mut stats = Vec::with_capacity(n);
     let mut frame_seconds = Vec::with_capacity(n);
-    for (p, s, t) in pieces.into_iter().flatten() {
+    for (p, s, t) in pieces {
         proxies.push(p);
         stats.push(s);
         frame_seconds.push(t);
