@@ -10,6 +10,7 @@ pub mod pack;
 
 use super::assembly::{Evaluator, FrameProblem};
 use super::backend::{check_shape, BackendError, BatchBackend, EnergyEval, FrameModel};
+use rayon::prelude::*;
 use std::sync::{Arc, Mutex};
 
 /// The shader source; `pack::Packed::header` is prepended at pipeline creation.
@@ -104,7 +105,8 @@ pub struct WgpuBackend {
     bind_group: wgpu::BindGroup,
     input: wgpu::Buffer,
     output: wgpu::Buffer,
-    staging: wgpu::Buffer,
+    /// Two read-back buffers: one chunk is read while the next one runs.
+    staging: [wgpu::Buffer; 2],
     params: wgpu::Buffer,
     rows: pack::Rows,
     cap: usize,
@@ -112,8 +114,8 @@ pub struct WgpuBackend {
     nm: usize,
     host_in: Vec<f32>,
     host_out: Vec<f32>,
-    /// Reference point of each frame of the chunk (f32-representable, in f64).
-    refs: Vec<[f64; 3]>,
+    /// Reference point of each frame of the two chunks in flight (f32-representable, in f64).
+    refs: [Vec<[f64; 3]>; 2],
     errors: ErrorSlot,
 }
 
@@ -250,7 +252,7 @@ impl WgpuBackend {
         let input = buffer("input", cap * rows.input, U::STORAGE | U::COPY_DST);
         let scratch = buffer("scratch", cap * rows.scratch, U::STORAGE);
         let output = buffer("output", cap * rows.output, U::STORAGE | U::COPY_SRC);
-        let staging = buffer("staging", cap * rows.output, U::MAP_READ | U::COPY_DST);
+        let staging = [0, 1].map(|_| buffer("staging", cap * rows.output, U::MAP_READ | U::COPY_DST));
         let params = buffer("params", 4, U::UNIFORM | U::COPY_DST);
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("batch"),
@@ -284,7 +286,7 @@ impl WgpuBackend {
             nm: eval.model.markers.len(),
             host_in: vec![0.0; cap * rows.input],
             host_out: vec![0.0; cap * rows.output],
-            refs: vec![[0.0; 3]; cap],
+            refs: [vec![[0.0; 3]; cap], vec![[0.0; 3]; cap]],
             errors,
         })
     }
@@ -294,7 +296,7 @@ impl WgpuBackend {
     }
 
     /// Packs frames into `host_in` (structure of arrays, stride `cap`).
-    fn pack_chunk(&mut self, frames: &[FrameProblem<'_>], proxies: &[f64]) {
+    fn pack_chunk(&mut self, frames: &[FrameProblem<'_>], proxies: &[f64], slot: usize) {
         let (cap, r, np) = (self.cap, self.rows, self.np);
         let hi = &mut self.host_in;
         for (i, fr) in frames.iter().enumerate() {
@@ -312,7 +314,7 @@ impl WgpuBackend {
             for ca in &mut c {
                 *ca = if n > 0 { (*ca / n as f64) as f32 as f64 } else { 0.0 };
             }
-            self.refs[i] = c;
+            self.refs[slot][i] = c;
             for k in 0..np {
                 hi[(r.i_p + k) * cap + i] = proxies[i * np + k] as f32;
             }
@@ -333,9 +335,11 @@ impl WgpuBackend {
         }
     }
 
-    /// Runs one chunk of `n` frames through `pipeline` and reads back the first `rows` output rows.
-    fn run_chunk(&mut self, n: usize, linearize: bool) -> Result<(), BackendError> {
+    /// Uploads the packed chunk of `n` frames, dispatches it and starts reading back its first
+    /// `rows` output rows into staging buffer `slot`.
+    fn submit(&mut self, slot: usize, n: usize, linearize: bool) -> Pending {
         let rows = if linearize { self.rows.output } else { 3 };
+        // Queue writes are ordered after earlier submissions, so the chunk in flight keeps its data.
         self.queue.write_buffer(&self.input, 0, bytemuck::cast_slice(&self.host_in));
         self.queue.write_buffer(&self.params, 0, bytemuck::cast_slice(&[n as u32, 0, 0, 0]));
         let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("chunk") });
@@ -346,36 +350,75 @@ impl WgpuBackend {
             pass.dispatch_workgroups(n.div_ceil(64) as u32, 1, 1);
         }
         let bytes = (4 * rows * self.cap) as u64;
-        enc.copy_buffer_to_buffer(&self.output, 0, &self.staging, 0, bytes);
-        self.queue.submit([enc.finish()]);
-        let slice = self.staging.slice(..bytes);
+        enc.copy_buffer_to_buffer(&self.output, 0, &self.staging[slot], 0, bytes);
+        let index = self.queue.submit([enc.finish()]);
         let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
+        self.staging[slot].slice(..bytes).map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
         });
+        Pending { slot, rows, index, rx }
+    }
+
+    /// Waits for a submitted chunk and copies its results into `host_out`.
+    fn finish(&mut self, p: Pending) -> Result<(), BackendError> {
         self.device
-            .poll(wgpu::PollType::wait_indefinitely())
+            .poll(wgpu::PollType::Wait { submission_index: Some(p.index), timeout: None })
             .map_err(|e| self.fail(format!("waiting for the device: {e}")))?;
-        match rx.recv() {
+        match p.rx.recv() {
             Ok(Ok(())) => {}
             Ok(Err(e)) => return Err(self.fail(format!("mapping the results: {e}"))),
             Err(_) => return Err(self.fail("the results were never mapped".into())),
         }
+        let words = p.rows * self.cap;
         {
+            let slice = self.staging[p.slot].slice(..(4 * words) as u64);
             let view = slice.get_mapped_range().map_err(|e| self.fail(format!("reading the results: {e:?}")))?;
-            self.host_out[..rows * self.cap].copy_from_slice(bytemuck::cast_slice(&view));
+            self.host_out[..words].copy_from_slice(bytemuck::cast_slice(&view));
         }
-        self.staging.unmap();
+        self.staging[p.slot].unmap();
         if let Some(e) = self.errors.lock().unwrap_or_else(|p| p.into_inner()).take() {
             return Err(self.fail(e));
         }
         Ok(())
     }
 
-    fn chunks(&self, n: usize) -> impl Iterator<Item = (usize, usize)> {
-        let cap = self.cap;
-        (0..n.div_ceil(cap)).map(move |c| (c * cap, ((c + 1) * cap).min(n)))
+    /// Runs `frames` chunk by chunk, two chunks in flight: while the device works on chunk
+    /// `i`, the host packs chunk `i + 1` and unpacks chunk `i − 1` with `unpack(range, self)`.
+    fn run(
+        &mut self,
+        frames: &[FrameProblem<'_>],
+        proxies: &[f64],
+        linearize: bool,
+        mut unpack: impl FnMut(std::ops::Range<usize>, &WgpuBackend, usize),
+    ) -> Result<(), BackendError> {
+        let (n, cap, np) = (frames.len(), self.cap, self.np);
+        let mut in_flight: Option<(Pending, std::ops::Range<usize>)> = None;
+        for c in 0..n.div_ceil(cap) {
+            let (a, b) = (c * cap, ((c + 1) * cap).min(n));
+            let slot = c % 2;
+            self.pack_chunk(&frames[a..b], &proxies[a * np..b * np], slot);
+            let pending = self.submit(slot, b - a, linearize);
+            if let Some((p, range)) = in_flight.replace((pending, a..b)) {
+                let s = p.slot;
+                self.finish(p)?;
+                unpack(range, self, s);
+            }
+        }
+        if let Some((p, range)) = in_flight {
+            let s = p.slot;
+            self.finish(p)?;
+            unpack(range, self, s);
+        }
+        Ok(())
     }
+}
+
+/// A chunk submitted and being read back.
+struct Pending {
+    slot: usize,
+    rows: usize,
+    index: wgpu::SubmissionIndex,
+    rx: std::sync::mpsc::Receiver<Result<(), wgpu::BufferAsyncError>>,
 }
 
 impl BatchBackend for WgpuBackend {
@@ -395,12 +438,9 @@ impl BatchBackend for WgpuBackend {
     ) -> Result<(), BackendError> {
         let np = self.np;
         check_shape(frames.len(), proxies.len(), out.len(), np)?;
-        let r = self.rows;
-        for (a, b) in self.chunks(frames.len()).collect::<Vec<_>>() {
-            self.pack_chunk(&frames[a..b], &proxies[a * np..b * np]);
-            self.run_chunk(b - a, true)?;
-            let (cap, ho) = (self.cap, &self.host_out);
-            for (i, o) in out[a..b].iter_mut().enumerate() {
+        self.run(frames, proxies, true, |range, me, slot| {
+            let (r, cap, ho, refs) = (me.rows, me.cap, &me.host_out, &me.refs[slot]);
+            out[range].par_iter_mut().enumerate().for_each(|(i, o)| {
                 let gn = &mut o.gn;
                 gn.energy = ho[i] as f64;
                 gn.marker_sq_sum = ho[cap + i] as f64;
@@ -417,13 +457,12 @@ impl BatchBackend for WgpuBackend {
                         e += 1;
                     }
                 }
-                let c = self.refs[i];
+                let c = refs[i];
                 for (j, x) in o.markers.iter_mut().enumerate() {
                     *x = ho[(r.o_x + j) * cap + i] as f64 + c[j % 3];
                 }
-            }
-        }
-        Ok(())
+            });
+        })
     }
 
     fn energy(
@@ -432,20 +471,16 @@ impl BatchBackend for WgpuBackend {
         proxies: &[f64],
         out: &mut [EnergyEval],
     ) -> Result<(), BackendError> {
-        let np = self.np;
-        check_shape(frames.len(), proxies.len(), out.len(), np)?;
-        for (a, b) in self.chunks(frames.len()).collect::<Vec<_>>() {
-            self.pack_chunk(&frames[a..b], &proxies[a * np..b * np]);
-            self.run_chunk(b - a, false)?;
-            let (cap, ho) = (self.cap, &self.host_out);
-            for (i, o) in out[a..b].iter_mut().enumerate() {
+        check_shape(frames.len(), proxies.len(), out.len(), self.np)?;
+        self.run(frames, proxies, false, |range, me, _| {
+            let (cap, ho) = (me.cap, &me.host_out);
+            for (i, o) in out[range].iter_mut().enumerate() {
                 *o = EnergyEval {
                     energy: ho[i] as f64,
                     marker_sq_sum: ho[cap + i] as f64,
                     markers_used: ho[2 * cap + i] as usize,
                 };
             }
-        }
-        Ok(())
+        })
     }
 }
