@@ -195,9 +195,9 @@ fn batched_evaluation_equals_frame_by_frame_evaluation() {
     let mut ws = EvalWorkspace::new(&model, &proxy);
     for f in 0..frames.len() {
         eval.linearize(&ps[f], &frames[f], &mut ws);
-        assert_eq!(batch[f].h, ws.gn.h);
-        assert_eq!(batch[f].g, ws.gn.g);
-        assert_eq!(batch[f].energy, ws.gn.energy);
+        assert_eq!(batch[f].gn.h, ws.gn.h);
+        assert_eq!(batch[f].gn.g, ws.gn.g);
+        assert_eq!(batch[f].gn.energy, ws.gn.energy);
         assert_eq!(energies[f], ws.gn.energy);
     }
 }

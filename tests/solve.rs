@@ -240,3 +240,64 @@ fn marker_placement_moves_free_markers_onto_their_observations_and_keeps_fixed_o
         }
     }
 }
+
+/// The per-frame loop that the lane scheduler replaced: one segment, warm-started frame by frame.
+fn plain_loop(ctx: &Context, obs: &[f64], cal: &smocap::solve::Calibration) -> Vec<Vec<f64>> {
+    use smocap::model::proxy::ProxyKind;
+    let eval = ctx.evaluator();
+    let (ny, nq, stride) = (ctx.model.ny(), ctx.model.nq(), 3 * ctx.model.markers.len());
+    let mut reference = ctx.proxy.state(&cal.proxies);
+    let mut tw = vec![0.0; ny];
+    for t in &ctx.proxy.terms {
+        let scale = ctx.proxy.proxies[t.proxy].kind == ProxyKind::Scale;
+        tw[t.y_index] = if scale { ctx.settings.scale_tracking_weight } else { ctx.settings.pose_prior_weight };
+    }
+    let mut neutral = ctx.proxy.default_proxies();
+    for (k, px) in ctx.proxy.proxies.iter().enumerate() {
+        if px.kind == ProxyKind::Scale {
+            neutral[k] = cal.proxies[k];
+        }
+    }
+    let mut solver = FrameSolver::new(&eval, ctx.settings.clone(), make_qp(ctx.settings.qp));
+    let mut prev: Option<Vec<f64>> = None;
+    let mut out = Vec::new();
+    for o in obs.chunks(stride) {
+        let mut p = prev.clone().unwrap_or_else(|| neutral.clone());
+        solver.clamp(&mut p);
+        let y = ctx.proxy.state(&p);
+        reference[..nq].copy_from_slice(&y[..nq]);
+        let frame = FrameProblem {
+            observed: o,
+            marker_weights: &ctx.marker_weights,
+            tracking_ref: &reference,
+            tracking_weights: &tw,
+        };
+        if prev.is_none() {
+            smocap::solve::init::multi_start(&mut solver, &frame, &mut p, &cal.proxies);
+        }
+        if solver.solve(&frame, &mut p).status != FrameStatus::TooFewMarkers {
+            prev = Some(p.clone());
+        }
+        out.push(p);
+    }
+    out
+}
+
+#[test]
+fn the_lane_scheduler_on_the_cpu_takes_exactly_the_steps_of_the_per_frame_loop() {
+    let ctx = Context::shipped().unwrap();
+    let mut s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 150, seed: 21, ..SynthOptions::default() });
+    let nm = s.trial.n_markers();
+    for v in &mut s.trial.positions[40 * nm * 3..41 * nm * 3] {
+        *v = f64::NAN; // a frame with too few markers in the middle
+    }
+    let cal = calibrate_subject(&ctx, &[("t", &s.trial)]).unwrap();
+    let matched = smocap::pipeline::trial::match_markers(&ctx, "t", &s.trial).unwrap();
+    let obs = smocap::pipeline::trial::observations(&s.trial, &matched.columns);
+    let plain = plain_loop(&ctx, &obs, &cal);
+    // One lane (one segment): bit-identical, bridged frame aside.
+    let r = solve_trial(&ctx, "t", &s.trial, &cal, 1).unwrap();
+    for f in (0..150).filter(|&f| f != 40) {
+        assert_eq!(r.proxies[f], plain[f], "frame {f}");
+    }
+}

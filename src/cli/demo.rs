@@ -1,7 +1,7 @@
 //! `smocap demo`: the whole path on the embedded default (shipped model, synthetic trial).
 
 use crate::pipeline::report::{trial_report, Report};
-use crate::pipeline::{calibrate_subject, solve_trial, Context};
+use crate::pipeline::{calibrate_subject, solve_trial_with, Context};
 use crate::synth::{synthesize, SynthOptions};
 use clap::Args;
 
@@ -18,6 +18,8 @@ pub struct DemoArgs {
     /// Worker threads.
     #[arg(long)]
     pub threads: Option<usize>,
+    #[command(flatten)]
+    pub backend: super::BackendArgs,
 }
 
 pub fn run(a: DemoArgs) -> anyhow::Result<u8> {
@@ -45,8 +47,10 @@ pub fn run(a: DemoArgs) -> anyhow::Result<u8> {
         t0.elapsed().as_secs_f64() * 1e3,
         cal.rmse_m * 1e3
     );
-    let r = solve_trial(&ctx, "demo", &s.trial, &cal, threads)?;
+    let (mut chosen, lanes) = a.backend.choose(&ctx, threads)?;
+    let r = solve_trial_with(&ctx, "demo", &s.trial, &cal, threads, lanes, chosen.backend())?;
     let mut report = Report::new(&ctx, threads);
+    report.set_backend(&chosen, lanes);
     report.push(trial_report(&ctx, &r, Some(&s.truth)));
     print!("{}", report.table());
     let t = &report.trials[0];
@@ -56,6 +60,9 @@ pub fn run(a: DemoArgs) -> anyhow::Result<u8> {
             pe.rmse, pe.p90, se.mean, se.max
         );
     }
-    println!("{} threads; {:.0} frames/s wall", threads, report.totals.frames_per_s);
+    println!(
+        "{} threads, {} lanes, backend {} ({}); {:.0} frames/s wall",
+        threads, lanes, report.backend, report.device, report.totals.frames_per_s
+    );
     Ok(0)
 }

@@ -3,6 +3,7 @@
 //! Exit codes: 0 all ok; 1 an error stopped the command (bad input, I/O); 2 usage error;
 //! 3 the command ran but some trials failed (see the report).
 
+mod bench;
 mod demo;
 mod markers;
 mod solve;
@@ -31,6 +32,8 @@ pub enum Command {
     Solve(solve::SolveArgs),
     /// What a marker file holds: frames, rate, units, labels, gaps per label, time span.
     Markers(markers::MarkersArgs),
+    /// Batched evaluation throughput (frame-evaluations/s) of the shipped model per batch size.
+    BenchBatch(bench::BenchArgs),
 }
 
 /// Runs the command line; errors are printed with their causes.
@@ -42,6 +45,7 @@ pub fn main() -> ExitCode {
         Command::Synth(a) => synth::run(a),
         Command::Solve(a) => solve::run(a),
         Command::Markers(a) => markers::run(a),
+        Command::BenchBatch(a) => bench::run(a),
     };
     match result {
         Ok(code) => ExitCode::from(code),
@@ -88,6 +92,38 @@ pub(crate) fn load_context_with_markers(
             ctx
         }
     })
+}
+
+/// Evaluation backend options shared by `solve` and `demo`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct BackendArgs {
+    /// Evaluation backend: `auto` uses wgpu only on a real (discrete or integrated) GPU.
+    #[arg(long, value_enum, default_value_t = crate::pipeline::device::BackendChoice::Auto)]
+    pub backend: crate::pipeline::device::BackendChoice,
+    /// Lanes of the scheduler (segments in flight); default: the thread count on the CPU
+    /// backend, 4096 on wgpu. A trial is cut into at most this many segments of ≥ 100 frames.
+    #[arg(long)]
+    pub lanes: Option<usize>,
+}
+
+impl BackendArgs {
+    /// The chosen backend (printing why `auto` fell back) and the lane count.
+    pub fn choose(
+        &self,
+        ctx: &crate::pipeline::Context,
+        threads: usize,
+    ) -> anyhow::Result<(crate::pipeline::device::Chosen, usize)> {
+        use crate::pipeline::device::{choose, Chosen};
+        let chosen = choose(self.backend, &ctx.evaluator())?;
+        if let Some(note) = chosen.note() {
+            eprintln!("note: {note}");
+        }
+        let lanes = self.lanes.unwrap_or(match chosen {
+            Chosen::Cpu { .. } => threads,
+            Chosen::Wgpu(_) => 4096,
+        });
+        Ok((chosen, lanes.max(1)))
+    }
 }
 
 /// Default thread count: the machine's available parallelism.

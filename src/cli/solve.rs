@@ -1,7 +1,7 @@
 //! `smocap solve`: calibrate a subject, then solve its trials.
 
 use crate::pipeline::report::{trial_report, Report};
-use crate::pipeline::{calibrate_subject, solve_trial};
+use crate::pipeline::{calibrate_subject, solve_trial_with};
 use crate::solve::QpBackend;
 use crate::synth::Truth;
 use anyhow::Context as _;
@@ -64,6 +64,8 @@ pub struct SolveArgs {
     /// rescaled, or the model generated), and its scale set beside it (`.scaleset.xml`).
     #[arg(long)]
     pub scaled_model: Option<PathBuf>,
+    #[command(flatten)]
+    pub backend: super::BackendArgs,
 }
 
 /// Applies `--ik-setup` to the context, printing what it did.
@@ -178,10 +180,15 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
             ctx = ctx.with_marker_offsets(offsets)?;
         }
     }
+    // The backend holds the model (on the GPU for wgpu): chosen once the markers are final.
+    let (mut chosen, lanes) = a.backend.choose(&ctx, threads)?;
+    report.set_backend(&chosen, lanes);
     let mut solved = Vec::new();
     for (name, t, conv) in &loaded {
         let result = match &calibration {
-            Some(Ok(c)) => solve_trial(&ctx, name, t, c, threads).map_err(|e| e.to_string()),
+            Some(Ok(c)) => {
+                solve_trial_with(&ctx, name, t, c, threads, lanes, chosen.backend()).map_err(|e| e.to_string())
+            }
             Some(Err(e)) => Err(format!("calibration failed: {e}")),
             None => Err("no calibration".into()),
         };

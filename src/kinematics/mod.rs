@@ -3,12 +3,17 @@
 //! Gauss–Newton model `(H, g, E)` of one frame in proxy space.
 //!
 //! The CPU implementation ([`cpu`]) is the reference; derivations are in `docs/KINEMATICS.md`.
+//! Batches of frames are evaluated behind [`backend::BatchBackend`]: on the CPU
+//! ([`backend::CpuBackend`]) or in wgpu compute shaders ([`gpu::WgpuBackend`]).
 
 pub mod assembly;
+pub mod backend;
 pub mod batch;
 pub mod cpu;
+pub mod gpu;
 pub mod layout;
 
 pub use assembly::{FrameProblem, GaussNewton};
+pub use backend::{BatchBackend, CpuBackend, EnergyEval, FrameModel};
 pub use cpu::Workspace;
 pub use layout::Layout;

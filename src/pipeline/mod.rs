@@ -4,12 +4,14 @@
 
 pub mod context;
 pub mod convention;
+pub mod device;
 pub mod export;
 pub mod ik_tasks;
+pub mod lanes;
 pub mod matching;
 pub mod report;
 pub mod stats;
 pub mod trial;
 
 pub use context::{Context, ContextError};
-pub use trial::{calibrate_subject, solve_trial, TrialError, TrialResult};
+pub use trial::{calibrate_subject, solve_trial, solve_trial_with, TrialError, TrialResult};

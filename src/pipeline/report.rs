@@ -77,7 +77,17 @@ pub struct Totals {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Report {
     pub smocap_version: String,
+    /// Evaluation backend: "cpu" or "wgpu".
     pub backend: String,
+    /// What the backend ran on (for wgpu: adapter name, type, API and driver).
+    #[serde(default)]
+    pub device: String,
+    /// Why `--backend auto` fell back to the CPU, when it did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub backend_note: Option<String>,
+    /// Lanes of the scheduler (frames in flight per batched evaluation, at most).
+    #[serde(default)]
+    pub lanes: usize,
     pub qp_backend: String,
     pub threads: usize,
     pub model: String,
@@ -94,6 +104,9 @@ impl Report {
         Report {
             smocap_version: env!("CARGO_PKG_VERSION").into(),
             backend: "cpu".into(),
+            device: "cpu, f64".into(),
+            backend_note: None,
+            lanes: threads,
             qp_backend: format!("{:?}", ctx.settings.qp).to_lowercase(),
             threads,
             model: ctx.model_source.clone(),
@@ -102,6 +115,14 @@ impl Report {
             trials: Vec::new(),
             totals: Totals::default(),
         }
+    }
+
+    /// Records the evaluation backend that solved the trials.
+    pub fn set_backend(&mut self, chosen: &super::device::Chosen, lanes: usize) {
+        self.backend = chosen.name().into();
+        self.device = chosen.device();
+        self.backend_note = chosen.note().map(str::to_string);
+        self.lanes = lanes;
     }
 
     /// Adds a trial (and updates the totals).

@@ -3,17 +3,18 @@
 //! segments solved in parallel, each cold-started. Frames with too few markers are reported and
 //! bridged from their neighbours.
 
+use super::lanes::{run_lanes, TrialInputs};
 use super::matching::{match_names, MarkerMatch, MatchError};
 use super::stats::{GapStats, MarkerGaps};
 use super::Context;
 use crate::io::MarkerTrial;
-use crate::kinematics::assembly::{fold_tracking_reference, FrameProblem};
+use crate::kinematics::assembly::FrameProblem;
+use crate::kinematics::backend::{BackendError, BatchBackend, CpuBackend};
 use crate::model::proxy::ProxyKind;
 use crate::solve::calibrate::track;
-use crate::solve::init::{cold_start, place_root, wrap_angle};
+use crate::solve::init::wrap_angle;
 use crate::solve::placement::place_markers;
-use crate::solve::{calibrate, make_qp, Calibration, FrameSolver, FrameStats, FrameStatus, WarmStart};
-use rayon::prelude::*;
+use crate::solve::{calibrate, make_qp, Calibration, FrameSolver, FrameStats, FrameStatus};
 use std::time::Instant;
 
 /// Why a trial could not be solved.
@@ -27,6 +28,8 @@ pub enum TrialError {
     Empty { trial: String },
     #[error("trial '{trial}': no frame has at least {min} observed markers, nothing to calibrate on")]
     NothingToCalibrate { trial: String, min: usize },
+    #[error("trial '{trial}': evaluation backend failed: {source}")]
+    Backend { trial: String, source: BackendError },
 }
 
 /// Result of one trial.
@@ -171,40 +174,6 @@ pub fn calibrate_subject(ctx: &Context, trials: &[(&str, &MarkerTrial)]) -> Resu
     Ok(cal)
 }
 
-/// Solves a frame without a previous solution from several starts and keeps the lowest energy:
-/// the neutral pose with root placement and sweeps ([`cold_start`]), the neutral pose with the
-/// root placed only, and the calibration pose with the root placed. Distal chains with few markers
-/// (forearm pronation against humeral rotation) have local minima that a single start can land in,
-/// and a walk tracked from a wrong first frame stays in the wrong basin.
-fn first_frame(
-    solver: &mut FrameSolver<'_>,
-    frame: &FrameProblem<'_>,
-    p: &mut [f64],
-    calibrated: &[f64],
-) -> FrameStats {
-    let mut best: Option<(FrameStats, Vec<f64>)> = None;
-    for start in 0..3 {
-        let mut trial = if start == 2 { calibrated.to_vec() } else { p.to_vec() };
-        solver.clamp(&mut trial);
-        if start == 0 {
-            cold_start(solver, frame, &mut trial);
-        } else {
-            place_root(solver, frame, &mut trial);
-        }
-        let stats = solver.solve(frame, &mut trial);
-        if stats.status == FrameStatus::TooFewMarkers {
-            p.copy_from_slice(&trial);
-            return stats;
-        }
-        if best.as_ref().is_none_or(|(b, _)| stats.energy < b.energy) {
-            best = Some((stats, trial));
-        }
-    }
-    let (stats, q) = best.expect("three starts");
-    p.copy_from_slice(&q);
-    stats
-}
-
 fn no_match(ctx: &Context, name: &str, trial: &MarkerTrial) -> TrialError {
     TrialError::NoMarkerMatch {
         trial: name.into(),
@@ -213,8 +182,8 @@ fn no_match(ctx: &Context, name: &str, trial: &MarkerTrial) -> TrialError {
     }
 }
 
-/// Solves every frame of `trial` for a subject calibrated as `calibration`, using up to
-/// `threads` segments in parallel.
+/// Solves every frame of `trial` for a subject calibrated as `calibration` on the CPU backend,
+/// with `threads` worker threads and as many lanes.
 pub fn solve_trial(
     ctx: &Context,
     name: &str,
@@ -222,9 +191,24 @@ pub fn solve_trial(
     calibration: &Calibration,
     threads: usize,
 ) -> Result<TrialResult, TrialError> {
+    solve_trial_with(ctx, name, trial, calibration, threads, threads, None)
+}
+
+/// Solves every frame of `trial` with the lane scheduler ([`super::lanes`]): the trial is cut
+/// into at most `lanes` segments of at least 100 frames, each cold-started and walked by one
+/// lane; evaluations go to `backend` (the CPU backend when `None`), the QPs to a pool of
+/// `threads` threads.
+pub fn solve_trial_with(
+    ctx: &Context,
+    name: &str,
+    trial: &MarkerTrial,
+    calibration: &Calibration,
+    threads: usize,
+    lanes: usize,
+    backend: Option<&mut (dyn BatchBackend + '_)>,
+) -> Result<TrialResult, TrialError> {
     let start = Instant::now();
     let nm = ctx.model.markers.len();
-    let stride = 3 * nm;
     let matched = match_markers(ctx, name, trial)?;
     let map = &matched.columns;
     if map.iter().all(Option::is_none) {
@@ -237,8 +221,8 @@ pub fn solve_trial(
     let settings = &ctx.settings;
     let eval = ctx.evaluator();
     let ny = ctx.model.ny();
-    let nq = ctx.model.nq();
     let np = ctx.proxy.np();
+    debug_assert_eq!(obs.len(), trial.n_frames() * 3 * nm);
 
     // Tracking: scales toward the calibration, coordinates weakly toward the warm start.
     let y_cal = ctx.proxy.state(&calibration.proxies);
@@ -258,67 +242,41 @@ pub fn solve_trial(
             neutral[k] = calibration.proxies[k];
         }
     }
-    // Segments solved in parallel.
+    // Segments, one lane each at a time.
     let n = trial.n_frames();
     let threads = threads.max(1);
-    let segments = threads.min(n.div_ceil(100)).max(1);
+    let lanes = lanes.max(1);
+    let segments = lanes.min(n.div_ceil(100)).max(1);
     let bounds: Vec<(usize, usize)> = (0..segments).map(|i| (i * n / segments, (i + 1) * n / segments)).collect();
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().ok();
-    let run = || {
-        bounds
-            .par_iter()
-            .map(|&(a, b)| {
-                let mut solver = FrameSolver::new(&eval, settings.clone(), make_qp(settings.qp));
-                let mut reference = y_cal.clone();
-                let (mut y_warm, mut dphi) = (vec![0.0; ny], vec![0.0; ctx.proxy.terms.len()]);
-                let mut out = Vec::with_capacity(b - a);
-                let mut prev: Option<Vec<f64>> = None;
-                let mut prev2: Option<Vec<f64>> = None;
-                for f in a..b {
-                    let t0 = Instant::now();
-                    let o = &obs[f * stride..(f + 1) * stride];
-                    let mut p = match (&prev, &prev2, settings.warm_start) {
-                        (Some(p1), Some(p2), WarmStart::Extrapolate) => {
-                            p1.iter().zip(p2).map(|(x1, x2)| 2.0 * x1 - x2).collect()
-                        }
-                        (Some(p1), _, _) => p1.clone(),
-                        // Cold start: the neutral pose at the calibrated morphology.
-                        (None, _, _) => neutral.clone(),
-                    };
-                    solver.clamp(&mut p);
-                    // Pose prior toward the warm start (scales keep the calibrated reference).
-                    ctx.proxy.apply(&p, &mut y_warm, &mut dphi);
-                    reference[..nq].copy_from_slice(&y_warm[..nq]);
-                    fold_tracking_reference(&mut reference, &track_w, &coord_ref, &coord_w);
-                    let frame = FrameProblem {
-                        observed: o,
-                        marker_weights: &ctx.marker_weights,
-                        tracking_ref: &reference,
-                        tracking_weights: &track_w_all,
-                    };
-                    let stats = if prev.is_none() {
-                        first_frame(&mut solver, &frame, &mut p, &calibration.proxies)
-                    } else {
-                        solver.solve(&frame, &mut p)
-                    };
-                    let ok = stats.status != FrameStatus::TooFewMarkers;
-                    out.push((p.clone(), stats, t0.elapsed().as_secs_f64()));
-                    if ok {
-                        prev2 = prev.replace(p);
-                    }
-                }
-                out
-            })
-            .collect::<Vec<_>>()
+    let inputs = TrialInputs {
+        observed: &obs,
+        marker_weights: &ctx.marker_weights,
+        reference: &y_cal,
+        tracking_weights: &track_w,
+        coordinate_targets: &coord_ref,
+        coordinate_weights: &coord_w,
+        tracking_weights_all: &track_w_all,
+        neutral: &neutral,
+        calibrated: &calibration.proxies,
     };
-    let pieces = match &pool {
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().ok();
+    let run = || match backend {
+        Some(b) => run_lanes(&eval, settings, &inputs, &bounds, lanes, b),
+        None => {
+            let mut cpu = CpuBackend::new(eval.clone());
+            run_lanes(&eval, settings, &inputs, &bounds, lanes, &mut cpu)
+        }
+    };
+    let solved = match &pool {
         Some(pool) => pool.install(run),
         None => run(),
-    };
+    }
+    .map_err(|e| TrialError::Backend { trial: name.into(), source: e })?;
+    let pieces = solved.into_iter().map(|r| r.expect("every frame lies in one segment"));
     let mut proxies = Vec::with_capacity(n);
     let mut stats = Vec::with_capacity(n);
     let mut frame_seconds = Vec::with_capacity(n);
-    for (p, s, t) in pieces.into_iter().flatten() {
+    for (p, s, t) in pieces {
         proxies.push(p);
         stats.push(s);
         frame_seconds.push(t);

@@ -107,6 +107,40 @@ pub fn sweep(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mut [f6
     solver.free = saved_free;
 }
 
+/// Solves a frame without a previous solution from several starts and keeps the lowest energy:
+/// the neutral pose with root placement and sweeps ([`cold_start`]), the neutral pose with the
+/// root placed only, and the calibration pose with the root placed. Distal chains with few markers
+/// (forearm pronation against humeral rotation) have local minima that a single start can land in,
+/// and a walk tracked from a wrong first frame stays in the wrong basin.
+pub fn multi_start(
+    solver: &mut FrameSolver<'_>,
+    frame: &FrameProblem<'_>,
+    p: &mut [f64],
+    calibrated: &[f64],
+) -> super::FrameStats {
+    let mut best: Option<(super::FrameStats, Vec<f64>)> = None;
+    for start in 0..3 {
+        let mut trial = if start == 2 { calibrated.to_vec() } else { p.to_vec() };
+        solver.clamp(&mut trial);
+        if start == 0 {
+            cold_start(solver, frame, &mut trial);
+        } else {
+            place_root(solver, frame, &mut trial);
+        }
+        let stats = solver.solve(frame, &mut trial);
+        if stats.status == super::FrameStatus::TooFewMarkers {
+            p.copy_from_slice(&trial);
+            return stats;
+        }
+        if best.as_ref().is_none_or(|(b, _)| stats.energy < b.energy) {
+            best = Some((stats, trial));
+        }
+    }
+    let (stats, q) = best.expect("three starts");
+    p.copy_from_slice(&q);
+    stats
+}
+
 /// Places the root body by a rigid fit of the model markers at `p` to the observed ones.
 pub fn place_root(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mut [f64]) {
     let eval = solver.eval;

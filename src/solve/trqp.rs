@@ -12,7 +12,8 @@
 
 use super::qp::{LinearConstraints, QpProblem, QpSolver};
 use super::settings::SolverSettings;
-use crate::kinematics::assembly::{EvalWorkspace, Evaluator, FrameProblem};
+use crate::kinematics::assembly::{EvalWorkspace, Evaluator, FrameProblem, GaussNewton};
+use crate::kinematics::backend::EnergyEval;
 use crate::model::proxy::ProxyKind;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
@@ -68,6 +69,32 @@ pub struct FrameSolver<'e> {
     pub free: Vec<bool>,
     /// Multiplies the step box (1 by default; the cold start widens it to travel far).
     pub step_multiplier: f64,
+    /// The Gauss–Newton model at the current iterate, as the state machine reads it.
+    pub gn: GaussNewton,
+}
+
+/// What a frame's trust-region iteration needs next (see [`FrameSolver::begin`]).
+#[derive(Clone, Copy, Debug)]
+pub enum Next {
+    /// `(H, g, E)` at the current `p` into [`FrameSolver::gn`], then [`FrameSolver::linearized`].
+    Linearize,
+    /// `E` at [`FrameSolver::trial`], then [`FrameSolver::evaluated`].
+    Energy,
+    /// The frame is solved.
+    Done(FrameStats),
+}
+
+/// The iteration state of one frame between evaluations.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameIteration {
+    pub stats: FrameStats,
+    started: bool,
+    lambda: f64,
+    shrink: f64,
+    shrink_used: f64,
+    pred: f64,
+    damp_pen: f64,
+    step_max: f64,
 }
 
 impl<'e> FrameSolver<'e> {
@@ -98,6 +125,7 @@ impl<'e> FrameSolver<'e> {
             hi: eval.proxy.proxies.iter().map(|p| p.range.1).collect(),
             free: vec![true; np],
             step_multiplier: 1.0,
+            gn: EvalWorkspace::new(eval.model, eval.proxy).gn,
             settings,
         }
     }
@@ -114,118 +142,185 @@ impl<'e> FrameSolver<'e> {
         }
     }
 
-    /// Minimises the frame objective starting from `p` (the warm start), in place.
+    /// Minimises the frame objective starting from `p` (the warm start), in place: the state
+    /// machine of [`FrameSolver::begin`] driven with this solver's own CPU evaluations.
     pub fn solve(&mut self, frame: &FrameProblem<'_>, p: &mut [f64]) -> FrameStats {
-        let s = &self.settings;
+        let mut it = self.begin(p);
+        let mut next = Next::Linearize;
+        loop {
+            next = match next {
+                Next::Linearize => {
+                    self.eval.linearize(p, frame, &mut self.ws);
+                    std::mem::swap(&mut self.gn, &mut self.ws.gn);
+                    self.linearized(&mut it, p)
+                }
+                Next::Energy => {
+                    let (energy, marker_sq_sum, markers_used) = self.eval.energy(&self.trial, frame, &mut self.ws);
+                    self.evaluated(&mut it, p, EnergyEval { energy, marker_sq_sum, markers_used })
+                }
+                Next::Done(stats) => {
+                    if stats.accepted == 0 || p.iter().zip(&self.trial).any(|(a, b)| a != b) {
+                        // Leave the workspace's kinematics at the returned p.
+                        self.eval.energy(p, frame, &mut self.ws);
+                    }
+                    // Keep `ws.gn` the model at the last linearisation, as callers may read it.
+                    std::mem::swap(&mut self.gn, &mut self.ws.gn);
+                    return stats;
+                }
+            };
+        }
+    }
+
+    /// Starts a frame at the warm start `p` (clamped into the proxy ranges, in place). The caller
+    /// then evaluates `(H, g, E)` at `p` into [`FrameSolver::gn`] and calls
+    /// [`FrameSolver::linearized`]; after that it follows the returned [`Next`]: evaluate `E` at
+    /// [`FrameSolver::trial`] and call [`FrameSolver::evaluated`], or linearise again at `p`, until
+    /// `Done`. Driven this way it takes exactly the steps of [`FrameSolver::solve`].
+    pub fn begin(&mut self, p: &mut [f64]) -> FrameIteration {
         self.clamp(p);
-        self.eval.linearize(p, frame, &mut self.ws);
-        let mut stats = FrameStats {
-            iterations: 0,
-            accepted: 0,
-            energy: self.ws.gn.energy,
-            rmse_m: self.ws.gn.rmse(),
-            markers_used: self.ws.gn.markers_used,
-            status: FrameStatus::MaxIterations,
-        };
-        if stats.markers_used < s.min_markers {
-            stats.status = FrameStatus::TooFewMarkers;
-            return stats;
+        FrameIteration {
+            stats: FrameStats {
+                iterations: 0,
+                accepted: 0,
+                energy: f64::NAN,
+                rmse_m: f64::NAN,
+                markers_used: 0,
+                status: FrameStatus::MaxIterations,
+            },
+            started: false,
+            lambda: self.settings.damping_init,
+            shrink: 1.0,
+            shrink_used: 1.0,
+            pred: 0.0,
+            damp_pen: 0.0,
+            step_max: 0.0,
         }
-        if stats.rmse_m < s.residual_tol_m {
-            stats.status = FrameStatus::Converged;
-            return stats;
+    }
+
+    /// Continues after `self.gn` was set to the Gauss–Newton model at `p`.
+    pub fn linearized(&mut self, it: &mut FrameIteration, p: &[f64]) -> Next {
+        if !it.started {
+            it.started = true;
+            let s = &self.settings;
+            it.stats.energy = self.gn.energy;
+            it.stats.rmse_m = self.gn.rmse();
+            it.stats.markers_used = self.gn.markers_used;
+            if it.stats.markers_used < s.min_markers {
+                it.stats.status = FrameStatus::TooFewMarkers;
+                return Next::Done(it.stats);
+            }
+            if it.stats.rmse_m < s.residual_tol_m {
+                it.stats.status = FrameStatus::Converged;
+                return Next::Done(it.stats);
+            }
         }
-        let mut lambda = s.damping_init;
-        let mut shrink = 1.0;
+        self.step(it, p)
+    }
+
+    /// Solves the step QP at `p` with `self.gn` and sets [`FrameSolver::trial`].
+    fn step(&mut self, it: &mut FrameIteration, p: &[f64]) -> Next {
+        let s = &self.settings;
+        if it.stats.iterations >= s.max_iterations {
+            return Next::Done(it.stats);
+        }
+        it.stats.iterations += 1;
+        let gn = &self.gn;
         let np = p.len();
-        while stats.iterations < s.max_iterations {
-            stats.iterations += 1;
-            let gn = &self.ws.gn;
-            let shrink_used = shrink;
-            self.h.copy_from(&gn.h);
-            for k in 0..np {
-                let d = lambda * gn.h[(k, k)].max(s.damping_floor);
-                self.damp[k] = d;
-                self.h[(k, k)] += d;
-                let b = if self.free[k] { self.step_box[k] * shrink * self.step_multiplier } else { 0.0 };
-                self.lb[k] = (-b).max(self.lo[k] - p[k]);
-                self.ub[k] = b.min(self.hi[k] - p[k]);
-            }
-            self.dp.fill(0.0);
-            if !self.eval.proxy.constraints.is_empty() {
-                let c = step_constraints(self.eval.proxy, p);
-                if self.qp.set_linear_constraints(Some(c)).is_err() {
-                    stats.status = FrameStatus::QpFailed;
-                    break;
-                }
-            }
-            let problem = QpProblem { h: &self.h, g: &gn.g, lb: &self.lb, ub: &self.ub };
-            if self.qp.solve(&problem, &mut self.dp).is_err() {
-                stats.status = FrameStatus::QpFailed;
-                break;
-            }
-            let g_dp = gn.g.dot(&self.dp);
-            let hdp = quad_form(&self.h, &self.dp);
-            let pred = -g_dp - 0.5 * hdp;
-            let damp_pen: f64 = 0.5 * (0..np).map(|k| self.damp[k] * self.dp[k] * self.dp[k]).sum::<f64>();
-            let step_max = self.dp.amax();
-            for k in 0..np {
-                self.trial[k] = p[k] + self.dp[k];
-            }
-            let e0 = gn.energy;
-            let (e1, sq, used) = self.eval.energy(&self.trial, frame, &mut self.ws);
-            let act = e0 - (e1 + damp_pen);
-            let rho = act / (pred + s.rho_eps);
-            if act > 0.0 {
-                stats.accepted += 1;
-                p.copy_from_slice(&self.trial);
-                stats.energy = e1;
-                stats.rmse_m = if used > 0 { (sq / used as f64).sqrt() } else { f64::NAN };
-                stats.markers_used = used;
-                if rho > 0.75 {
-                    lambda = (lambda / 3.0).max(s.damping_min);
-                    shrink = (shrink * 2.0).min(1.0);
-                } else if rho < 0.25 {
-                    lambda = (lambda * 2.0).min(s.damping_max);
-                }
-                // A step that the step box cut says nothing about convergence: the optimum may lie
-                // further out (a subject that moved far during a gap), so only the residual test
-                // may stop then.
-                let box_cut = (0..np).any(|k| {
-                    let b = self.step_box[k] * shrink_used * self.step_multiplier;
-                    self.free[k] && self.dp[k].abs() >= b * (1.0 - 1e-9)
-                });
-                let rel = (e0 - e1) / e0.max(f64::MIN_POSITIVE);
-                // The model's error over the step, |Δf_act − Δf_pred|, estimates what another
-                // iteration could still gain (both include the damping penalty, which cancels).
-                let model_error = (act - pred).abs() / e1.max(f64::MIN_POSITIVE);
-                let exact_model =
-                    s.model_error_tol > 0.0 && model_error < s.model_error_tol && lambda <= s.damping_init;
-                let converged = !box_cut && (rel < s.rel_decrease_tol || step_max < s.step_tol || exact_model);
-                if stats.rmse_m < s.residual_tol_m || converged {
-                    stats.status = FrameStatus::Converged;
-                    break;
-                }
-                self.eval.linearize(p, frame, &mut self.ws);
-            } else {
-                if step_max < s.step_tol {
-                    stats.status = FrameStatus::Converged;
-                    break;
-                }
-                if lambda >= s.damping_max {
-                    stats.status = FrameStatus::Stalled;
-                    break;
-                }
-                lambda = (lambda * 4.0).min(s.damping_max);
-                shrink *= 0.5;
-                // `ws.gn` still holds H and g at p; only the kinematics moved to the trial point.
+        it.shrink_used = it.shrink;
+        self.h.copy_from(&gn.h);
+        for k in 0..np {
+            let d = it.lambda * gn.h[(k, k)].max(s.damping_floor);
+            self.damp[k] = d;
+            self.h[(k, k)] += d;
+            let b = if self.free[k] { self.step_box[k] * it.shrink * self.step_multiplier } else { 0.0 };
+            self.lb[k] = (-b).max(self.lo[k] - p[k]);
+            self.ub[k] = b.min(self.hi[k] - p[k]);
+        }
+        self.dp.fill(0.0);
+        if !self.eval.proxy.constraints.is_empty() {
+            let c = step_constraints(self.eval.proxy, p);
+            if self.qp.set_linear_constraints(Some(c)).is_err() {
+                it.stats.status = FrameStatus::QpFailed;
+                return Next::Done(it.stats);
             }
         }
-        if stats.accepted == 0 || p.iter().zip(&self.trial).any(|(a, b)| a != b) {
-            // Leave the workspace's kinematics at the returned p.
-            self.eval.energy(p, frame, &mut self.ws);
+        let problem = QpProblem { h: &self.h, g: &gn.g, lb: &self.lb, ub: &self.ub };
+        if self.qp.solve(&problem, &mut self.dp).is_err() {
+            it.stats.status = FrameStatus::QpFailed;
+            return Next::Done(it.stats);
         }
-        stats
+        let g_dp = gn.g.dot(&self.dp);
+        let hdp = quad_form(&self.h, &self.dp);
+        it.pred = -g_dp - 0.5 * hdp;
+        it.damp_pen = 0.5 * (0..np).map(|k| self.damp[k] * self.dp[k] * self.dp[k]).sum::<f64>();
+        it.step_max = self.dp.amax();
+        for k in 0..np {
+            self.trial[k] = p[k] + self.dp[k];
+        }
+        Next::Energy
+    }
+
+    /// Continues with the objective `e` at [`FrameSolver::trial`]: accepts the step into `p` or
+    /// rejects it. `self.gn` must still hold the model at `p`.
+    pub fn evaluated(&mut self, it: &mut FrameIteration, p: &mut [f64], e: EnergyEval) -> Next {
+        let s = &self.settings;
+        let np = p.len();
+        let e0 = self.gn.energy;
+        let (e1, sq, used) = (e.energy, e.marker_sq_sum, e.markers_used);
+        let act = e0 - (e1 + it.damp_pen);
+        let rho = act / (it.pred + s.rho_eps);
+        if act > 0.0 {
+            it.stats.accepted += 1;
+            p.copy_from_slice(&self.trial);
+            it.stats.energy = e1;
+            it.stats.rmse_m = if used > 0 { (sq / used as f64).sqrt() } else { f64::NAN };
+            it.stats.markers_used = used;
+            if rho > 0.75 {
+                it.lambda = (it.lambda / 3.0).max(s.damping_min);
+                it.shrink = (it.shrink * 2.0).min(1.0);
+            } else if rho < 0.25 {
+                it.lambda = (it.lambda * 2.0).min(s.damping_max);
+            }
+            // A step that the step box cut says nothing about convergence: the optimum may lie
+            // further out (a subject that moved far during a gap), so only the residual test
+            // may stop then.
+            let box_cut = (0..np).any(|k| {
+                let b = self.step_box[k] * it.shrink_used * self.step_multiplier;
+                self.free[k] && self.dp[k].abs() >= b * (1.0 - 1e-9)
+            });
+            let rel = (e0 - e1) / e0.max(f64::MIN_POSITIVE);
+            // The model's error over the step, |Δf_act − Δf_pred|, estimates what another
+            // iteration could still gain (both include the damping penalty, which cancels).
+            let model_error = (act - it.pred).abs() / e1.max(f64::MIN_POSITIVE);
+            let exact_model = s.model_error_tol > 0.0 && model_error < s.model_error_tol && it.lambda <= s.damping_init;
+            let converged = !box_cut && (rel < s.rel_decrease_tol || it.step_max < s.step_tol || exact_model);
+            if it.stats.rmse_m < s.residual_tol_m || converged {
+                it.stats.status = FrameStatus::Converged;
+                return Next::Done(it.stats);
+            }
+            if it.stats.iterations >= s.max_iterations {
+                return Next::Done(it.stats);
+            }
+            Next::Linearize
+        } else {
+            if it.step_max < s.step_tol {
+                it.stats.status = FrameStatus::Converged;
+                return Next::Done(it.stats);
+            }
+            if it.lambda >= s.damping_max {
+                it.stats.status = FrameStatus::Stalled;
+                return Next::Done(it.stats);
+            }
+            it.lambda = (it.lambda * 4.0).min(s.damping_max);
+            it.shrink *= 0.5;
+            // `self.gn` still holds H and g at p; only the trial point moves.
+            self.step(it, p)
+        }
+    }
+
+    /// The trial point `p + Δp` of the last step.
+    pub fn trial(&self) -> &[f64] {
+        &self.trial
     }
 }
 

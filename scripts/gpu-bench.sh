@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# GPU benchmark for BENCHMARKS.md (issue 5). Run from the repository root on the GPU machine with a
+# prebuilt release binary (cargo build --release); needs no network.
+#   bash scripts/gpu-bench.sh            # writes results to stdout and to $OUT (or ./gpu-bench-out)
+# Measures: batched linearize/energy throughput of the shipped model at 1k/10k/100k frames per call
+# on cpu and wgpu, and whole-solve frames/s of a 100k-frame synthetic trial on both backends.
+set -uo pipefail
+cd "$(dirname "$0")/.."
+BIN=${BIN:-target/release/smocap}
+OUTDIR=${OUT:-gpu-bench-out}
+mkdir -p "$OUTDIR"
+[ -x "$BIN" ] || { echo "missing $BIN: build it with cargo build --release" >&2; exit 1; }
+{
+  echo "# date: $(date -u +%Y-%m-%dT%H:%MZ)"
+  echo "# host: $(uname -srm), $(nproc) cores"
+  command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader
+  for b in cpu wgpu; do
+    "$BIN" bench-batch --backend "$b" --sizes 1000,10000,100000 --repeats 5 || echo "bench-batch $b failed: $?"
+  done
+  for b in cpu wgpu; do
+    for lanes in 1000 4000; do
+      echo "# whole solve: demo --frames 100000 --backend $b --lanes $lanes"
+      "$BIN" demo --frames 100000 --backend "$b" --lanes "$lanes" 2>&1 | tail -5 \
+        || echo "demo $b failed: $?"
+    done
+  done
+} 2>&1 | tee "$OUTDIR/gpu-bench.txt"

@@ -1,0 +1,377 @@
+// Batched forward kinematics, marker Jacobian and Gauss–Newton assembly: one invocation per frame.
+// The mirror of src/kinematics/{cpu,assembly}.rs and src/model/proxy.rs in f32; see
+// docs/KINEMATICS.md for the math and src/kinematics/wgpu/layout.rs for the buffer layouts.
+//
+// The host prepends a header of `const` declarations (sizes and section offsets of one model and
+// one chunk capacity `CAP`). Per-frame arrays are structure-of-arrays: entry `row` of frame `f`
+// lives at `row * CAP + f`, so neighbouring invocations touch neighbouring words.
+//
+// Positions are relative to a per-frame reference point `c` (subtracted in f64 on the host), so
+// that f32 carries the body-scale differences rather than lab-scale coordinates; Jacobian rows
+// are formed relative to the body origin (`a + w × x = (a + w × c_b) + w × (x − c_b)`), which
+// avoids cancelling two world-sized terms.
+
+struct Params {
+    // Frames in this chunk (≤ CAP).
+    n: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
+}
+
+@group(0) @binding(0) var<storage, read> mu: array<u32>;
+@group(0) @binding(1) var<storage, read> mf: array<f32>;
+@group(0) @binding(2) var<storage, read> inp: array<f32>;
+@group(0) @binding(3) var<storage, read_write> scr: array<f32>;
+@group(0) @binding(4) var<storage, read_write> outb: array<f32>;
+@group(0) @binding(5) var<uniform> params: Params;
+
+const NONE: u32 = 0xffffffffu;
+
+fn at(row: u32, f: u32) -> u32 {
+    return row * CAP + f;
+}
+
+fn mf3(i: u32) -> vec3<f32> {
+    return vec3<f32>(mf[i], mf[i + 1u], mf[i + 2u]);
+}
+
+fn mf33(i: u32) -> mat3x3<f32> {
+    return mat3x3<f32>(mf3(i), mf3(i + 3u), mf3(i + 6u));
+}
+
+fn s3(row: u32, f: u32) -> vec3<f32> {
+    return vec3<f32>(scr[at(row, f)], scr[at(row + 1u, f)], scr[at(row + 2u, f)]);
+}
+
+fn put3(row: u32, f: u32, v: vec3<f32>) {
+    scr[at(row, f)] = v.x;
+    scr[at(row + 1u, f)] = v.y;
+    scr[at(row + 2u, f)] = v.z;
+}
+
+fn rot(b: u32, f: u32) -> mat3x3<f32> {
+    let r = S_ROT + 9u * b;
+    return mat3x3<f32>(s3(r, f), s3(r + 3u, f), s3(r + 6u, f));
+}
+
+fn scale(b: u32, f: u32) -> vec3<f32> {
+    return s3(S_Y + NQ + 3u * b, f);
+}
+
+// Index of the segment [x[i], x[i+1]] of n sorted knots at `xs` used for `x` (clamped to the ends).
+fn segment(xs: u32, n: u32, x: f32) -> u32 {
+    var p = 0u;
+    while (p < n && mf[xs + p] <= x) {
+        p += 1u;
+    }
+    if (p == 0u) {
+        return 0u;
+    }
+    if (p >= n) {
+        return n - 2u;
+    }
+    return p - 1u;
+}
+
+// Value and derivative of function `fi` at `x` (src/model/function.rs; multipliers are folded
+// into the scale stored first among the parameters).
+fn feval(fi: u32, x: f32) -> vec2<f32> {
+    let kind = mu[U_FUNC + 3u * fi];
+    let s = mu[U_FUNC + 3u * fi + 1u];
+    let n = mu[U_FUNC + 3u * fi + 2u];
+    let k = mf[s];
+    let p = s + 1u;
+    var v = 0.0;
+    var d = 0.0;
+    switch kind {
+        case 0u: {
+            v = mf[p];
+        }
+        case 1u: {
+            v = mf[p] * x + mf[p + 1u];
+            d = mf[p];
+        }
+        case 2u: {
+            for (var i = n; i > 0u; i -= 1u) {
+                d = d * x + v;
+                v = v * x + mf[p + i - 1u];
+            }
+        }
+        case 3u: {
+            // Natural cubic spline: x, a, b, c, d arrays of n each; linear outside.
+            let last = n - 1u;
+            if (x <= mf[p]) {
+                v = mf[p + n] + mf[p + 2u * n] * (x - mf[p]);
+                d = mf[p + 2u * n];
+            } else if (x >= mf[p + last]) {
+                v = mf[p + n + last] + mf[p + 2u * n + last] * (x - mf[p + last]);
+                d = mf[p + 2u * n + last];
+            } else {
+                let i = segment(p, n, x);
+                let t = x - mf[p + i];
+                let a = mf[p + n + i];
+                let b = mf[p + 2u * n + i];
+                let c = mf[p + 3u * n + i];
+                let dd = mf[p + 4u * n + i];
+                v = a + t * (b + t * (c + t * dd));
+                d = b + t * (2.0 * c + 3.0 * t * dd);
+            }
+        }
+        case 4u: {
+            // Piecewise linear: x, y arrays of n each.
+            if (n == 1u) {
+                v = mf[p + 1u];
+            } else if (n >= 2u) {
+                let i = segment(p, n, x);
+                let slope = (mf[p + n + i + 1u] - mf[p + n + i]) / (mf[p + i + 1u] - mf[p + i]);
+                v = mf[p + n + i] + slope * (x - mf[p + i]);
+                d = slope;
+            }
+        }
+        default: {}
+    }
+    return vec2<f32>(k * v, k * d);
+}
+
+// Rotation by `angle` about unit `axis`.
+fn axis_angle(axis: vec3<f32>, angle: f32) -> mat3x3<f32> {
+    let c = cos(angle);
+    let s = sin(angle);
+    let t = 1.0 - c;
+    let x = axis.x;
+    let y = axis.y;
+    let z = axis.z;
+    return mat3x3<f32>(
+        vec3<f32>(t * x * x + c, t * x * y + s * z, t * x * z - s * y),
+        vec3<f32>(t * x * y - s * z, t * y * y + c, t * y * z + s * x),
+        vec3<f32>(t * x * z + s * y, t * y * z - s * x, t * z * z + c),
+    );
+}
+
+// y = Φ(p) and J_Φ into scratch, forward kinematics of bodies and markers, model markers into
+// the output, and E. Returns nothing: everything lands in `scr` and `outb`.
+fn forward(f: u32) {
+    // Φ.
+    for (var j = 0u; j < NY; j += 1u) {
+        scr[at(S_Y + j, f)] = mf[F_YOFF + j];
+    }
+    for (var t = 0u; t < NT; t += 1u) {
+        let yj = mu[U_TERM + 3u * t];
+        let k = mu[U_TERM + 3u * t + 1u];
+        let vd = feval(mu[U_TERM + 3u * t + 2u], inp[at(I_P + k, f)]);
+        scr[at(S_Y + yj, f)] += vd.x;
+        scr[at(S_DPHI + t, f)] = vd.y;
+    }
+    let c = vec3<f32>(inp[at(I_C, f)], inp[at(I_C + 1u, f)], inp[at(I_C + 2u, f)]);
+    // Bodies in topological order.
+    for (var b = 0u; b < NB; b += 1u) {
+        let parent = mu[U_BODY + 3u * b];
+        var rp = mat3x3<f32>(vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(0.0, 1.0, 0.0), vec3<f32>(0.0, 0.0, 1.0));
+        var tp = -c;
+        var sp = vec3<f32>(1.0, 1.0, 1.0);
+        if (parent != NONE) {
+            rp = rot(parent, f);
+            tp = s3(S_POS + 3u * parent, f);
+            sp = scale(parent, f);
+        }
+        let fb = F_BODY + 24u * b;
+        var r = rp * mf33(fb);
+        var t = tp + rp * (sp * mf3(fb + 9u));
+        for (var m = mu[U_BODY + 3u * b + 1u]; m < mu[U_BODY + 3u * b + 2u]; m += 1u) {
+            let kind = mu[U_MOT + 4u * m];
+            let coord = mu[U_MOT + 4u * m + 1u];
+            var x = 0.0;
+            if (coord != NONE) {
+                x = scr[at(S_Y + coord, f)];
+            }
+            let vd = feval(mu[U_MOT + 4u * m + 2u], x);
+            let axis = mf3(F_MOT + 6u * m);
+            let axis_w = r * axis;
+            put3(S_MAX + 3u * m, f, axis_w);
+            put3(S_MOR + 3u * m, f, t);
+            scr[at(S_MVAL + m, f)] = vd.x;
+            scr[at(S_MDER + m, f)] = vd.y;
+            if (kind == 0u) {
+                r = r * axis_angle(axis, vd.x);
+            } else {
+                var sigma = 1.0;
+                if (mu[U_MOT + 4u * m + 3u] != 0u) {
+                    sigma = dot(mf3(F_MOT + 6u * m + 3u), sp);
+                }
+                scr[at(S_MSIG + m, f)] = sigma;
+                t += axis_w * (vd.x * sigma);
+            }
+        }
+        let sb = scale(b, f);
+        let rb = r * transpose(mf33(fb + 12u));
+        put3(S_POS + 3u * b, f, t - rb * (sb * mf3(fb + 21u)));
+        let rr = S_ROT + 9u * b;
+        put3(rr, f, rb[0]);
+        put3(rr + 3u, f, rb[1]);
+        put3(rr + 6u, f, rb[2]);
+    }
+    // Markers and the objective.
+    var e = 0.0;
+    var sq = 0.0;
+    var used = 0.0;
+    for (var m = 0u; m < NM; m += 1u) {
+        let b = mu[U_MARK + m];
+        let x = s3(S_POS + 3u * b, f) + rot(b, f) * (scale(b, f) * mf3(F_MARK + 3u * m));
+        outb[at(O_X + 3u * m, f)] = x.x;
+        outb[at(O_X + 3u * m + 1u, f)] = x.y;
+        outb[at(O_X + 3u * m + 2u, f)] = x.z;
+        let w = inp[at(I_MW + m, f)];
+        if (w > 0.0) {
+            let o = vec3<f32>(inp[at(I_OBS + 3u * m, f)], inp[at(I_OBS + 3u * m + 1u, f)], inp[at(I_OBS + 3u * m + 2u, f)]);
+            let d = x - o;
+            let d2 = dot(d, d);
+            e += 0.5 * w * d2;
+            sq += d2;
+            used += 1.0;
+        }
+    }
+    for (var j = 0u; j < NY; j += 1u) {
+        let w = inp[at(I_TW + j, f)];
+        if (w > 0.0) {
+            let d = scr[at(S_Y + j, f)] - inp[at(I_TREF + j, f)];
+            e += 0.5 * w * d * d;
+        }
+    }
+    outb[at(O_E, f)] = e;
+    outb[at(O_SQ, f)] = sq;
+    outb[at(O_USED, f)] = used;
+}
+
+// Index of H[i][j] (i ≤ j) in the packed upper triangle, row by row.
+fn hidx(i: u32, j: u32) -> u32 {
+    return O_H + i * (2u * NP - i + 1u) / 2u + (j - i);
+}
+
+// J_m rows of every used marker, H (upper triangle) and g, after `forward`.
+fn assemble(f: u32) {
+    for (var k = 0u; k < NP; k += 1u) {
+        outb[at(O_G + k, f)] = 0.0;
+    }
+    for (var k = 0u; k < NH; k += 1u) {
+        outb[at(O_H + k, f)] = 0.0;
+    }
+    for (var lb = 0u; lb < NLB; lb += 1u) {
+        let base = U_LB + 7u * lb;
+        let body = mu[base];
+        let ns = mu[base + 1u];
+        let slots = mu[base + 2u];
+        let cb = s3(S_POS + 3u * body, f);
+        let rb = rot(body, f);
+        let sb = scale(body, f);
+        var any = false;
+        for (var q = mu[base + 5u]; q < mu[base + 6u]; q += 1u) {
+            let m = mu[U_LBM + 3u * q];
+            let w = inp[at(I_MW + m, f)];
+            if (w <= 0.0) {
+                continue;
+            }
+            if (!any) {
+                any = true;
+                // The body's chain once for all its markers: slot s of a marker row at a point
+                // x on the body is A_s + W_s × (x − c_b).
+                for (var s = 0u; s < 6u * ns; s += 1u) {
+                    scr[at(S_AW + s, f)] = 0.0;
+                }
+                for (var it = mu[base + 3u]; it < mu[base + 4u]; it += 1u) {
+                    let kind = mu[U_ITEM + 5u * it];
+                    let idx = mu[U_ITEM + 5u * it + 1u];
+                    let kk = mu[U_ITEM + 5u * it + 2u];
+                    let d = scr[at(S_DPHI + mu[U_ITEM + 5u * it + 3u], f)];
+                    let slot = mu[U_ITEM + 5u * it + 4u];
+                    let coef = mf[F_ITEM + it];
+                    var a = vec3<f32>(0.0, 0.0, 0.0);
+                    var wv = vec3<f32>(0.0, 0.0, 0.0);
+                    switch kind {
+                        case 0u: {
+                            a = rot(idx, f)[kk] * coef;
+                        }
+                        case 1u: {
+                            wv = s3(S_MAX + 3u * idx, f) * scr[at(S_MDER + idx, f)];
+                            a = cross(wv, cb - s3(S_MOR + 3u * idx, f));
+                        }
+                        case 2u: {
+                            a = s3(S_MAX + 3u * idx, f) * (scr[at(S_MDER + idx, f)] * scr[at(S_MSIG + idx, f)]);
+                        }
+                        case 3u: {
+                            a = s3(S_MAX + 3u * idx, f) * (scr[at(S_MVAL + idx, f)] * coef);
+                        }
+                        default: {
+                            a = -rot(idx, f)[kk] * coef;
+                        }
+                    }
+                    put3(S_AW + 3u * slot, f, s3(S_AW + 3u * slot, f) + a * d);
+                    put3(S_AW + 3u * (ns + slot), f, s3(S_AW + 3u * (ns + slot), f) + wv * d);
+                }
+            }
+            let off = mf3(F_MARK + 3u * m);
+            let xr = rb * (sb * off);
+            for (var s = 0u; s < ns; s += 1u) {
+                put3(S_ROW + 3u * s, f, s3(S_AW + 3u * s, f) + cross(s3(S_AW + 3u * (ns + s), f), xr));
+            }
+            for (var oi = mu[U_LBM + 3u * q + 1u]; oi < mu[U_LBM + 3u * q + 2u]; oi += 1u) {
+                let kk = mu[U_OITEM + 3u * oi];
+                let d = scr[at(S_DPHI + mu[U_OITEM + 3u * oi + 1u], f)];
+                let slot = mu[U_OITEM + 3u * oi + 2u];
+                put3(S_ROW + 3u * slot, f, s3(S_ROW + 3u * slot, f) + rb[kk] * (off[kk] * d));
+            }
+            let x = vec3<f32>(outb[at(O_X + 3u * m, f)], outb[at(O_X + 3u * m + 1u, f)], outb[at(O_X + 3u * m + 2u, f)]);
+            let o = vec3<f32>(inp[at(I_OBS + 3u * m, f)], inp[at(I_OBS + 3u * m + 1u, f)], inp[at(I_OBS + 3u * m + 2u, f)]);
+            let r = x - o;
+            for (var i = 0u; i < ns; i += 1u) {
+                let ki = mu[slots + i];
+                let ci = w * s3(S_ROW + 3u * i, f);
+                outb[at(O_G + ki, f)] += dot(ci, r);
+                for (var j = i; j < ns; j += 1u) {
+                    let h = hidx(ki, mu[slots + j]);
+                    outb[at(h, f)] += dot(ci, s3(S_ROW + 3u * j, f));
+                }
+            }
+        }
+    }
+    // Tracking term J_Φᵀ W_t J_Φ, J_Φᵀ W_t e_t.
+    for (var j = 0u; j < NY; j += 1u) {
+        let w = inp[at(I_TW + j, f)];
+        if (w <= 0.0) {
+            continue;
+        }
+        let e = scr[at(S_Y + j, f)] - inp[at(I_TREF + j, f)];
+        let t0 = mu[U_YT + 2u * j];
+        let t1 = mu[U_YT + 2u * j + 1u];
+        for (var t = t0; t < t1; t += 1u) {
+            let kt = mu[U_TERM + 3u * t + 1u];
+            let dt = scr[at(S_DPHI + t, f)];
+            outb[at(O_G + kt, f)] += w * dt * e;
+            for (var u = t0; u < t1; u += 1u) {
+                let ku = mu[U_TERM + 3u * u + 1u];
+                if (kt <= ku) {
+                    outb[at(hidx(kt, ku), f)] += w * dt * scr[at(S_DPHI + u, f)];
+                }
+            }
+        }
+    }
+}
+
+@compute @workgroup_size(64)
+fn linearize(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let f = gid.x;
+    if (f >= params.n) {
+        return;
+    }
+    forward(f);
+    assemble(f);
+}
+
+@compute @workgroup_size(64)
+fn energy(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let f = gid.x;
+    if (f >= params.n) {
+        return;
+    }
+    forward(f);
+}

@@ -1,0 +1,102 @@
+//! `smocap bench-batch`: batched evaluation throughput (frame-evaluations/s) of the shipped model
+//! per backend and batch size, for BENCHMARKS.md. Frames are synthetic (2 mm noise, 100 Hz),
+//! evaluated at the true proxies; the first repetition is a warm-up and not timed.
+
+use crate::kinematics::assembly::FrameProblem;
+use crate::kinematics::backend::{BatchBackend, CpuBackend, EnergyEval, FrameModel};
+use crate::pipeline::device::{choose, BackendChoice, Chosen};
+use crate::pipeline::Context;
+use crate::synth::{synthesize, SynthOptions};
+use clap::Args;
+use std::time::Instant;
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Backend to measure (`auto` as in `solve`).
+    #[arg(long, value_enum, default_value_t = BackendChoice::Cpu)]
+    pub backend: BackendChoice,
+    /// Batch sizes (frames per call), comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "1000,10000,100000")]
+    pub sizes: Vec<usize>,
+    /// Timed repetitions per size (the median is reported).
+    #[arg(long, default_value_t = 5)]
+    pub repeats: usize,
+    /// Distinct synthetic frames, tiled up to the batch size.
+    #[arg(long, default_value_t = 2000)]
+    pub distinct: usize,
+}
+
+pub fn run(a: BenchArgs) -> anyhow::Result<u8> {
+    let ctx = Context::shipped()?;
+    let eval = ctx.evaluator();
+    let mut chosen = choose(a.backend, &eval)?;
+    if let Some(note) = chosen.note() {
+        eprintln!("note: {note}");
+    }
+    let mut cpu = CpuBackend::new(eval.clone());
+    let device = chosen.device();
+    let backend: &mut dyn BatchBackend = match &mut chosen {
+        Chosen::Cpu { .. } => &mut cpu,
+        Chosen::Wgpu(b) => b.as_mut(),
+    };
+    let distinct = a.distinct.max(1);
+    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: distinct, seed: 5, ..SynthOptions::default() });
+    let matched = crate::pipeline::trial::match_markers(&ctx, "synthetic", &s.trial)?;
+    let obs = crate::pipeline::trial::observations(&s.trial, &matched.columns);
+    let (np, nm, ny) = (ctx.proxy.np(), ctx.model.markers.len(), ctx.model.ny());
+    let stride = 3 * nm;
+    let y_ref = ctx.proxy.state(&ctx.proxy.default_proxies());
+    let tw = vec![1e-6; ny];
+    println!(
+        "# bench-batch: shipped model ({np} proxies, {nm} markers), backend {} on {device}, median of {} runs",
+        backend.name(),
+        a.repeats
+    );
+    println!("# backend\tbatch\tlinearize_ms\tlinearize_frames_per_s\tenergy_ms\tenergy_frames_per_s");
+    for &n in &a.sizes {
+        let n = n.max(1);
+        let frames: Vec<FrameProblem<'_>> = (0..n)
+            .map(|i| {
+                let f = i % distinct;
+                FrameProblem {
+                    observed: &obs[f * stride..(f + 1) * stride],
+                    marker_weights: &ctx.marker_weights,
+                    tracking_ref: &y_ref,
+                    tracking_weights: &tw,
+                }
+            })
+            .collect();
+        let proxies: Vec<f64> = (0..n).flat_map(|i| s.truth.proxies[i % distinct].iter().copied()).collect();
+        let mut out = vec![FrameModel::new(np, nm); n];
+        let mut energies = vec![EnergyEval::default(); n];
+        let mut lin = Vec::new();
+        let mut en = Vec::new();
+        for r in 0..=a.repeats.max(1) {
+            let t = Instant::now();
+            backend.linearize(&frames, &proxies, &mut out)?;
+            let tl = t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            backend.energy(&frames, &proxies, &mut energies)?;
+            let te = t.elapsed().as_secs_f64();
+            if r > 0 {
+                lin.push(tl);
+                en.push(te);
+            }
+        }
+        let (ml, me) = (median(&mut lin), median(&mut en));
+        println!(
+            "{}\t{n}\t{:.3}\t{:.0}\t{:.3}\t{:.0}",
+            backend.name(),
+            ml * 1e3,
+            n as f64 / ml,
+            me * 1e3,
+            n as f64 / me
+        );
+    }
+    Ok(0)
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}

@@ -1,0 +1,486 @@
+//! The wgpu compute backend: `shaders/batch.wgsl` evaluates one frame per invocation, in f32.
+//!
+//! The model is uploaded once ([`pack`]); each batch is cut into chunks of at most `cap` frames
+//! (what one storage binding holds, from the adapter's limits), each chunk is packed as
+//! structure-of-arrays, dispatched, and read back. Positions travel relative to a per-frame
+//! reference point (the centroid of the observed markers, rounded to f32) so that f32 resolves
+//! body-scale differences rather than lab coordinates.
+
+pub mod pack;
+
+use super::assembly::{Evaluator, FrameProblem};
+use super::backend::{check_shape, BackendError, BatchBackend, EnergyEval, FrameModel};
+use rayon::prelude::*;
+use std::sync::{Arc, Mutex};
+
+/// The shader source; `pack::Packed::header` is prepended at pipeline creation.
+pub const SHADER: &str = include_str!("../../../shaders/batch.wgsl");
+
+/// Frames per chunk when the adapter's limits allow it.
+pub const DEFAULT_CAP: usize = 16_384;
+
+/// What an adapter is, for choosing and for run metadata.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct AdapterSummary {
+    pub name: String,
+    /// "DiscreteGpu", "IntegratedGpu", "Cpu", ...
+    pub device_type: String,
+    pub backend: String,
+    pub driver: String,
+    pub driver_info: String,
+    /// A real GPU (discrete or integrated), as `--backend auto` requires.
+    pub real_gpu: bool,
+}
+
+impl AdapterSummary {
+    fn of(info: &wgpu::AdapterInfo) -> AdapterSummary {
+        AdapterSummary {
+            name: info.name.clone(),
+            device_type: format!("{:?}", info.device_type),
+            backend: format!("{:?}", info.backend),
+            driver: info.driver.clone(),
+            driver_info: info.driver_info.clone(),
+            real_gpu: matches!(info.device_type, wgpu::DeviceType::DiscreteGpu | wgpu::DeviceType::IntegratedGpu),
+        }
+    }
+}
+
+impl std::fmt::Display for AdapterSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} ({}, {}, driver {} {})", self.name, self.device_type, self.backend, self.driver, self.driver_info)
+    }
+}
+
+/// Backends searched for adapters (those compiled in for this platform).
+pub fn searched_backends() -> String {
+    format!("{:?}", wgpu::Instance::enabled_backend_features())
+}
+
+fn instance() -> wgpu::Instance {
+    wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env())
+}
+
+/// Preference order: discrete, integrated, virtual, other, CPU.
+fn rank(t: wgpu::DeviceType) -> u8 {
+    match t {
+        wgpu::DeviceType::DiscreteGpu => 0,
+        wgpu::DeviceType::IntegratedGpu => 1,
+        wgpu::DeviceType::VirtualGpu => 2,
+        wgpu::DeviceType::Other => 3,
+        wgpu::DeviceType::Cpu => 4,
+    }
+}
+
+/// Every adapter wgpu finds, best first (no device is created).
+pub fn list_adapters() -> Vec<AdapterSummary> {
+    let mut a = pollster::block_on(instance().enumerate_adapters(wgpu::Backends::all()));
+    a.sort_by_key(|a| rank(a.get_info().device_type));
+    a.iter().map(|a| AdapterSummary::of(&a.get_info())).collect()
+}
+
+/// The best adapter, or an error naming what was searched.
+fn best_adapter() -> Result<wgpu::Adapter, BackendError> {
+    let mut a = pollster::block_on(instance().enumerate_adapters(wgpu::Backends::all()));
+    a.sort_by_key(|a| rank(a.get_info().device_type));
+    a.into_iter().next().ok_or_else(|| {
+        BackendError::NoAdapter(format!(
+            "wgpu found no adapter on backends {} (for Vulkan on Linux: a GPU driver, or lavapipe from \
+             mesa-vulkan-drivers, and libvulkan1; VK_ICD_FILENAMES={})",
+            searched_backends(),
+            std::env::var("VK_ICD_FILENAMES").unwrap_or_else(|_| "<unset>".into())
+        ))
+    })
+}
+
+/// Device errors raised outside an error scope, kept until the next check.
+type ErrorSlot = Arc<Mutex<Option<String>>>;
+
+/// Batched evaluation on a wgpu adapter (f32).
+pub struct WgpuBackend {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    adapter: AdapterSummary,
+    linearize: wgpu::ComputePipeline,
+    energy: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+    input: wgpu::Buffer,
+    output: wgpu::Buffer,
+    /// Two read-back buffers: one chunk is read while the next one runs.
+    staging: [wgpu::Buffer; 2],
+    params: wgpu::Buffer,
+    rows: pack::Rows,
+    cap: usize,
+    np: usize,
+    nm: usize,
+    host_in: Vec<f32>,
+    host_out: Vec<f32>,
+    /// Reference point of each frame of the two chunks in flight (f32-representable, in f64).
+    refs: [Vec<[f64; 3]>; 2],
+    errors: ErrorSlot,
+}
+
+impl std::fmt::Debug for WgpuBackend {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("WgpuBackend").field("adapter", &self.adapter).field("cap", &self.cap).finish()
+    }
+}
+
+impl WgpuBackend {
+    /// Uploads `eval`'s model to the best adapter found; `require_real_gpu` refuses CPU adapters.
+    pub fn new(eval: &Evaluator<'_>, max_cap: usize) -> Result<WgpuBackend, BackendError> {
+        let adapter = best_adapter()?;
+        WgpuBackend::on_adapter(eval, adapter, max_cap)
+    }
+
+    /// The adapter this backend runs on.
+    pub fn adapter(&self) -> &AdapterSummary {
+        &self.adapter
+    }
+
+    /// Frames per dispatch.
+    pub fn chunk_capacity(&self) -> usize {
+        self.cap
+    }
+
+    fn on_adapter(eval: &Evaluator<'_>, adapter: wgpu::Adapter, max_cap: usize) -> Result<WgpuBackend, BackendError> {
+        let summary = AdapterSummary::of(&adapter.get_info());
+        let fail = |message: String| BackendError::Device { adapter: summary.name.clone(), message };
+        let limits = adapter.limits();
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("smocap"),
+            required_features: wgpu::Features::empty(),
+            required_limits: limits.clone(),
+            experimental_features: wgpu::ExperimentalFeatures::disabled(),
+            memory_hints: wgpu::MemoryHints::Performance,
+            trace: wgpu::Trace::Off,
+        }))
+        .map_err(|e| fail(format!("requesting a device: {e}")))?;
+        let errors: ErrorSlot = Arc::default();
+        let slot = errors.clone();
+        device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+            let mut s = slot.lock().unwrap_or_else(|p| p.into_inner());
+            s.get_or_insert_with(|| e.to_string());
+        }));
+
+        let packed = pack::pack(eval.model, eval.proxy, &eval.layout);
+        let rows = packed.rows;
+        // Chunk capacity: every per-frame buffer must fit one binding.
+        let widest = 4 * rows.input.max(rows.scratch).max(rows.output) as u64;
+        let bind = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let by_limits = (bind / widest) as usize;
+        let by_groups = limits.max_compute_workgroups_per_dimension as usize * 64;
+        let cap = max_cap.min(by_limits).min(by_groups) / 64 * 64;
+        if cap == 0 {
+            return Err(fail(format!(
+                "one frame needs {widest} bytes per binding, more than the adapter's limit of {bind} bytes"
+            )));
+        }
+        let source = format!("{}\n{}", packed.header(cap), SHADER);
+
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("batch.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("batch"),
+            entries: &[
+                storage(0, true),
+                storage(1, true),
+                storage(2, true),
+                storage(3, false),
+                storage(4, false),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 5,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("batch"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = |entry: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let linearize = pipeline("linearize");
+        let energy = pipeline("energy");
+
+        use wgpu::util::DeviceExt as _;
+        let init = |label: &str, contents: &[u8]| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        let mu = init("model u32", bytemuck::cast_slice(&packed.mu));
+        let mf = init("model f32", bytemuck::cast_slice(&packed.mf));
+        let buffer = |label: &str, words: usize, usage: wgpu::BufferUsages| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: 4 * words as u64,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        use wgpu::BufferUsages as U;
+        let input = buffer("input", cap * rows.input, U::STORAGE | U::COPY_DST);
+        let scratch = buffer("scratch", cap * rows.scratch, U::STORAGE);
+        let output = buffer("output", cap * rows.output, U::STORAGE | U::COPY_SRC);
+        let staging = [0, 1].map(|_| buffer("staging", cap * rows.output, U::MAP_READ | U::COPY_DST));
+        let params = buffer("params", 4, U::UNIFORM | U::COPY_DST);
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("batch"),
+            layout: &layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: mu.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: mf.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: input.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: scratch.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 4, resource: output.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 5, resource: params.as_entire_binding() },
+            ],
+        });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(fail(format!("creating the compute pipelines: {e}")));
+        }
+        Ok(WgpuBackend {
+            device,
+            queue,
+            adapter: summary,
+            linearize,
+            energy,
+            bind_group,
+            input,
+            output,
+            staging,
+            params,
+            rows,
+            cap,
+            np: eval.proxy.np(),
+            nm: eval.model.markers.len(),
+            host_in: vec![0.0; cap * rows.input],
+            host_out: vec![0.0; cap * rows.output],
+            refs: [vec![[0.0; 3]; cap], vec![[0.0; 3]; cap]],
+            errors,
+        })
+    }
+
+    fn fail(&self, message: String) -> BackendError {
+        BackendError::Device { adapter: self.adapter.name.clone(), message }
+    }
+
+    /// Packs frames into `host_in` (structure of arrays, stride `cap`).
+    fn pack_chunk(&mut self, frames: &[FrameProblem<'_>], proxies: &[f64], slot: usize) {
+        let (cap, r, np) = (self.cap, self.rows, self.np);
+        let hi = &mut self.host_in;
+        for (i, fr) in frames.iter().enumerate() {
+            let used = |m: usize| {
+                let o = &fr.observed[3 * m..3 * m + 3];
+                fr.marker_weights[m] > 0.0 && !o.iter().any(|v| v.is_nan())
+            };
+            let (mut c, mut n) = ([0.0f64; 3], 0usize);
+            for m in (0..self.nm).filter(|&m| used(m)) {
+                for (a, ca) in c.iter_mut().enumerate() {
+                    *ca += fr.observed[3 * m + a];
+                }
+                n += 1;
+            }
+            for ca in &mut c {
+                *ca = if n > 0 { (*ca / n as f64) as f32 as f64 } else { 0.0 };
+            }
+            self.refs[slot][i] = c;
+            for k in 0..np {
+                hi[(r.i_p + k) * cap + i] = proxies[i * np + k] as f32;
+            }
+            for m in 0..self.nm {
+                let u = used(m);
+                hi[(r.i_mw + m) * cap + i] = if u { fr.marker_weights[m] as f32 } else { 0.0 };
+                for (a, &ca) in c.iter().enumerate() {
+                    hi[(r.i_obs + 3 * m + a) * cap + i] = if u { (fr.observed[3 * m + a] - ca) as f32 } else { 0.0 };
+                }
+            }
+            for (j, (&y, &w)) in fr.tracking_ref.iter().zip(fr.tracking_weights).enumerate() {
+                hi[(r.i_tref + j) * cap + i] = y as f32;
+                hi[(r.i_tw + j) * cap + i] = w as f32;
+            }
+            for (a, &ca) in c.iter().enumerate() {
+                hi[(r.i_c + a) * cap + i] = ca as f32;
+            }
+        }
+    }
+
+    /// Uploads the packed chunk of `n` frames, dispatches it and starts reading back its first
+    /// `rows` output rows into staging buffer `slot`.
+    fn submit(&mut self, slot: usize, n: usize, linearize: bool) -> Pending {
+        let rows = if linearize { self.rows.output } else { 3 };
+        // Queue writes are ordered after earlier submissions, so the chunk in flight keeps its data.
+        self.queue.write_buffer(&self.input, 0, bytemuck::cast_slice(&self.host_in));
+        self.queue.write_buffer(&self.params, 0, bytemuck::cast_slice(&[n as u32, 0, 0, 0]));
+        let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("chunk") });
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
+            pass.set_pipeline(if linearize { &self.linearize } else { &self.energy });
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.dispatch_workgroups(n.div_ceil(64) as u32, 1, 1);
+        }
+        let bytes = (4 * rows * self.cap) as u64;
+        enc.copy_buffer_to_buffer(&self.output, 0, &self.staging[slot], 0, bytes);
+        let index = self.queue.submit([enc.finish()]);
+        let (tx, rx) = std::sync::mpsc::channel();
+        self.staging[slot].slice(..bytes).map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        Pending { slot, rows, index, rx }
+    }
+
+    /// Waits for a submitted chunk and copies its results into `host_out`.
+    fn finish(&mut self, p: Pending) -> Result<(), BackendError> {
+        self.device
+            .poll(wgpu::PollType::Wait { submission_index: Some(p.index), timeout: None })
+            .map_err(|e| self.fail(format!("waiting for the device: {e}")))?;
+        match p.rx.recv() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => return Err(self.fail(format!("mapping the results: {e}"))),
+            Err(_) => return Err(self.fail("the results were never mapped".into())),
+        }
+        let words = p.rows * self.cap;
+        {
+            let slice = self.staging[p.slot].slice(..(4 * words) as u64);
+            let view = slice.get_mapped_range().map_err(|e| self.fail(format!("reading the results: {e:?}")))?;
+            self.host_out[..words].copy_from_slice(bytemuck::cast_slice(&view));
+        }
+        self.staging[p.slot].unmap();
+        if let Some(e) = self.errors.lock().unwrap_or_else(|p| p.into_inner()).take() {
+            return Err(self.fail(e));
+        }
+        Ok(())
+    }
+
+    /// Runs `frames` chunk by chunk, two chunks in flight: while the device works on chunk
+    /// `i`, the host packs chunk `i + 1` and unpacks chunk `i − 1` with `unpack(range, self)`.
+    fn run(
+        &mut self,
+        frames: &[FrameProblem<'_>],
+        proxies: &[f64],
+        linearize: bool,
+        mut unpack: impl FnMut(std::ops::Range<usize>, &WgpuBackend, usize),
+    ) -> Result<(), BackendError> {
+        let (n, cap, np) = (frames.len(), self.cap, self.np);
+        let mut in_flight: Option<(Pending, std::ops::Range<usize>)> = None;
+        for c in 0..n.div_ceil(cap) {
+            let (a, b) = (c * cap, ((c + 1) * cap).min(n));
+            let slot = c % 2;
+            self.pack_chunk(&frames[a..b], &proxies[a * np..b * np], slot);
+            let pending = self.submit(slot, b - a, linearize);
+            if let Some((p, range)) = in_flight.replace((pending, a..b)) {
+                let s = p.slot;
+                self.finish(p)?;
+                unpack(range, self, s);
+            }
+        }
+        if let Some((p, range)) = in_flight {
+            let s = p.slot;
+            self.finish(p)?;
+            unpack(range, self, s);
+        }
+        Ok(())
+    }
+}
+
+/// A chunk submitted and being read back.
+struct Pending {
+    slot: usize,
+    rows: usize,
+    index: wgpu::SubmissionIndex,
+    rx: std::sync::mpsc::Receiver<Result<(), wgpu::BufferAsyncError>>,
+}
+
+impl BatchBackend for WgpuBackend {
+    fn name(&self) -> &'static str {
+        "wgpu"
+    }
+
+    fn device(&self) -> String {
+        format!("wgpu: {}, f32", self.adapter)
+    }
+
+    fn linearize(
+        &mut self,
+        frames: &[FrameProblem<'_>],
+        proxies: &[f64],
+        out: &mut [FrameModel],
+    ) -> Result<(), BackendError> {
+        let np = self.np;
+        check_shape(frames.len(), proxies.len(), out.len(), np)?;
+        self.run(frames, proxies, true, |range, me, slot| {
+            let (r, cap, ho, refs) = (me.rows, me.cap, &me.host_out, &me.refs[slot]);
+            out[range].par_iter_mut().enumerate().for_each(|(i, o)| {
+                let gn = &mut o.gn;
+                gn.energy = ho[i] as f64;
+                gn.marker_sq_sum = ho[cap + i] as f64;
+                gn.markers_used = ho[2 * cap + i] as usize;
+                for k in 0..np {
+                    gn.g[k] = ho[(r.o_g + k) * cap + i] as f64;
+                }
+                let mut e = r.o_h;
+                for k in 0..np {
+                    for l in k..np {
+                        let v = ho[e * cap + i] as f64;
+                        gn.h[(k, l)] = v;
+                        gn.h[(l, k)] = v;
+                        e += 1;
+                    }
+                }
+                let c = refs[i];
+                for (j, x) in o.markers.iter_mut().enumerate() {
+                    *x = ho[(r.o_x + j) * cap + i] as f64 + c[j % 3];
+                }
+            });
+        })
+    }
+
+    fn energy(
+        &mut self,
+        frames: &[FrameProblem<'_>],
+        proxies: &[f64],
+        out: &mut [EnergyEval],
+    ) -> Result<(), BackendError> {
+        check_shape(frames.len(), proxies.len(), out.len(), self.np)?;
+        self.run(frames, proxies, false, |range, me, _| {
+            let (cap, ho) = (me.cap, &me.host_out);
+            for (i, o) in out[range].iter_mut().enumerate() {
+                *o = EnergyEval {
+                    energy: ho[i] as f64,
+                    marker_sq_sum: ho[cap + i] as f64,
+                    markers_used: ho[2 * cap + i] as usize,
+                };
+            }
+        })
+    }
+}

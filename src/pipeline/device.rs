@@ -1,0 +1,98 @@
+//! Choosing the evaluation backend (`--backend cpu|wgpu|auto`).
+//!
+//! `auto` takes wgpu only on a real GPU (discrete or integrated): a CPU adapter such as
+//! lavapipe runs the shaders slower than the CPU backend, so `auto` falls back to the CPU and
+//! says why. `wgpu` takes whatever adapter exists and fails clearly when there is none.
+
+use crate::kinematics::assembly::Evaluator;
+use crate::kinematics::backend::{BackendError, BatchBackend};
+use crate::kinematics::gpu::{self, WgpuBackend};
+
+/// The backend asked for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BackendChoice {
+    /// The f64 CPU reference on rayon's pool.
+    Cpu,
+    /// wgpu compute shaders (f32) on the best adapter found, CPU adapters included.
+    Wgpu,
+    /// wgpu on a real GPU, else the CPU backend.
+    #[default]
+    Auto,
+}
+
+/// The backend chosen, with why.
+pub enum Chosen {
+    Cpu {
+        /// Why `auto` did not take wgpu (None when the CPU was asked for).
+        note: Option<String>,
+    },
+    Wgpu(Box<WgpuBackend>),
+}
+
+impl Chosen {
+    /// "cpu" or "wgpu".
+    pub fn name(&self) -> &'static str {
+        match self {
+            Chosen::Cpu { .. } => "cpu",
+            Chosen::Wgpu(_) => "wgpu",
+        }
+    }
+
+    /// Device description for run metadata.
+    pub fn device(&self) -> String {
+        match self {
+            Chosen::Cpu { .. } => "cpu, f64".into(),
+            Chosen::Wgpu(b) => b.device(),
+        }
+    }
+
+    /// The note explaining a fallback, if any.
+    pub fn note(&self) -> Option<&str> {
+        match self {
+            Chosen::Cpu { note } => note.as_deref(),
+            Chosen::Wgpu(_) => None,
+        }
+    }
+
+    /// The batch backend to pass to the trial driver (None: the driver's own CPU backend).
+    pub fn backend(&mut self) -> Option<&mut (dyn BatchBackend + 'static)> {
+        match self {
+            Chosen::Cpu { .. } => None,
+            Chosen::Wgpu(b) => Some(b.as_mut()),
+        }
+    }
+}
+
+/// Picks the backend for `eval`'s model. Errors only for `wgpu` without a usable adapter.
+pub fn choose(choice: BackendChoice, eval: &Evaluator<'_>) -> Result<Chosen, BackendError> {
+    match choice {
+        BackendChoice::Cpu => Ok(Chosen::Cpu { note: None }),
+        BackendChoice::Wgpu => Ok(Chosen::Wgpu(Box::new(WgpuBackend::new(eval, gpu::DEFAULT_CAP)?))),
+        BackendChoice::Auto => {
+            let adapters = gpu::list_adapters();
+            let Some(best) = adapters.first() else {
+                return Ok(Chosen::Cpu {
+                    note: Some(format!(
+                        "backend auto: no wgpu adapter found on {}; using the CPU backend",
+                        gpu::searched_backends()
+                    )),
+                });
+            };
+            if !best.real_gpu {
+                return Ok(Chosen::Cpu {
+                    note: Some(format!(
+                        "backend auto: the best wgpu adapter, {best}, is not a real GPU (a CPU adapter \
+                         such as lavapipe is slower than the CPU backend); using the CPU backend"
+                    )),
+                });
+            }
+            match WgpuBackend::new(eval, gpu::DEFAULT_CAP) {
+                Ok(b) => Ok(Chosen::Wgpu(Box::new(b))),
+                Err(e) => Ok(Chosen::Cpu {
+                    note: Some(format!("backend auto: {best} could not be used ({e}); using the CPU backend")),
+                }),
+            }
+        }
+    }
+}

@@ -1,0 +1,247 @@
+//! The lane scheduler: many frames in flight, one batched evaluation per trust-region round.
+//!
+//! Each lane walks the frames of one segment in order, warm-starting every frame from the
+//! previous solution, exactly as a per-segment loop over [`FrameSolver::solve`] would. A round
+//! is: one batched `(H, g, E)` evaluation of every lane that needs one, the follow-up QPs of
+//! those lanes on rayon's pool, then one batched `E` evaluation of every trial point and the
+//! accept/reject decisions on the pool. Lanes whose frame is done start their next frame (a cold
+//! start, on the CPU, at the beginning of a segment); lanes whose segment ends take the next
+//! segment from the queue. The solver never knows which [`BatchBackend`] evaluated.
+
+use crate::kinematics::assembly::{fold_tracking_reference, Evaluator, FrameProblem};
+use crate::kinematics::backend::{BackendError, BatchBackend, EnergyEval, FrameModel};
+use crate::solve::init::multi_start;
+use crate::solve::trqp::{FrameIteration, Next};
+use crate::solve::{make_qp, FrameSolver, FrameStats, FrameStatus, SolverSettings, WarmStart};
+use rayon::prelude::*;
+use std::collections::VecDeque;
+use std::time::Instant;
+
+/// What every frame of the trial shares.
+#[derive(Clone, Copy, Debug)]
+pub struct TrialInputs<'a> {
+    /// Observations, frame-major (`frame · 3M + 3·marker + axis`, m), NaN gaps.
+    pub observed: &'a [f64],
+    pub marker_weights: &'a [f64],
+    /// Tracking reference `y_ref` for the scales (the pose part is reset to each warm start).
+    pub reference: &'a [f64],
+    pub tracking_weights: &'a [f64],
+    /// Soft coordinate targets (IK coordinate tasks, length ny) and their weights, folded into
+    /// the reference each frame ([`fold_tracking_reference`]); `tracking_weights_all` is
+    /// `tracking_weights + coordinate_weights`.
+    pub coordinate_targets: &'a [f64],
+    pub coordinate_weights: &'a [f64],
+    pub tracking_weights_all: &'a [f64],
+    /// Cold-start proxies (neutral pose at the calibrated morphology).
+    pub neutral: &'a [f64],
+    /// The calibration's proxies: one more start for a segment's first frame.
+    pub calibrated: &'a [f64],
+}
+
+/// One solved frame: proxies, statistics, seconds from its start to its end (wall).
+pub type FrameResult = (Vec<f64>, FrameStats, f64);
+
+struct Lane<'e> {
+    solver: FrameSolver<'e>,
+    /// Current segment `[a, b)` and frame.
+    seg: Option<(usize, usize)>,
+    frame: usize,
+    p: Vec<f64>,
+    prev: Option<Vec<f64>>,
+    prev2: Option<Vec<f64>>,
+    reference: Vec<f64>,
+    it: Option<FrameIteration>,
+    next: Next,
+    started: Instant,
+    y_warm: Vec<f64>,
+    dphi: Vec<f64>,
+}
+
+impl<'e> Lane<'e> {
+    fn frame_problem<'a>(&'a self, inp: &TrialInputs<'a>, stride: usize) -> FrameProblem<'a> {
+        FrameProblem {
+            observed: &inp.observed[self.frame * stride..(self.frame + 1) * stride],
+            marker_weights: inp.marker_weights,
+            tracking_ref: &self.reference,
+            tracking_weights: inp.tracking_weights_all,
+        }
+    }
+
+    /// Prepares `self.frame`: warm start, pose prior, cold start at a segment's beginning.
+    fn start_frame(&mut self, inp: &TrialInputs<'_>, stride: usize) {
+        let eval = self.solver.eval;
+        let nq = eval.model.nq();
+        self.started = Instant::now();
+        match (&self.prev, &self.prev2, self.solver.settings.warm_start) {
+            (Some(p1), Some(p2), WarmStart::Extrapolate) => {
+                for (k, v) in self.p.iter_mut().enumerate() {
+                    *v = 2.0 * p1[k] - p2[k];
+                }
+            }
+            (Some(p1), _, _) => self.p.copy_from_slice(p1),
+            (None, _, _) => self.p.copy_from_slice(inp.neutral),
+        }
+        self.solver.clamp(&mut self.p);
+        // Pose prior toward the warm start (scales keep the calibrated reference).
+        eval.proxy.apply(&self.p, &mut self.y_warm, &mut self.dphi);
+        self.reference.copy_from_slice(inp.reference);
+        self.reference[..nq].copy_from_slice(&self.y_warm[..nq]);
+        fold_tracking_reference(
+            &mut self.reference,
+            inp.tracking_weights,
+            inp.coordinate_targets,
+            inp.coordinate_weights,
+        );
+        if self.prev.is_none() {
+            let frame = FrameProblem {
+                observed: &inp.observed[self.frame * stride..(self.frame + 1) * stride],
+                marker_weights: inp.marker_weights,
+                tracking_ref: &self.reference,
+                tracking_weights: inp.tracking_weights_all,
+            };
+            // A segment's first frame: several starts, the best kept; the iteration below then
+            // only confirms it.
+            multi_start(&mut self.solver, &frame, &mut self.p, inp.calibrated);
+        }
+        self.it = Some(self.solver.begin(&mut self.p));
+        self.next = Next::Linearize;
+    }
+}
+
+/// Solves the frames of `segments` (ranges of frame indices of one trial) with `lanes` lanes,
+/// evaluating through `backend`. Returns one result per frame of the trial (frames in no
+/// segment are `None`). Runs on the current rayon pool.
+pub fn run_lanes(
+    eval: &Evaluator<'_>,
+    settings: &SolverSettings,
+    inp: &TrialInputs<'_>,
+    segments: &[(usize, usize)],
+    lanes: usize,
+    backend: &mut dyn BatchBackend,
+) -> Result<Vec<Option<FrameResult>>, BackendError> {
+    let (np, nm, ny) = (eval.proxy.np(), eval.model.markers.len(), eval.model.ny());
+    let stride = 3 * nm;
+    let n_frames = inp.observed.len() / stride.max(1);
+    let mut queue: VecDeque<(usize, usize)> = segments.iter().copied().filter(|(a, b)| b > a).collect();
+    let n_lanes = lanes.max(1).min(queue.len().max(1));
+    let mut lanes: Vec<Lane<'_>> = (0..n_lanes)
+        .map(|_| Lane {
+            solver: FrameSolver::new(eval, settings.clone(), make_qp(settings.qp)),
+            seg: None,
+            frame: 0,
+            p: vec![0.0; np],
+            prev: None,
+            prev2: None,
+            reference: vec![0.0; ny],
+            it: None,
+            next: Next::Done(idle_stats()),
+            started: Instant::now(),
+            y_warm: vec![0.0; ny],
+            dphi: vec![0.0; eval.proxy.terms.len()],
+        })
+        .collect();
+    let mut results: Vec<Option<FrameResult>> = vec![None; n_frames];
+    let mut models: Vec<FrameModel> = (0..n_lanes).map(|_| FrameModel::new(np, nm)).collect();
+    let mut energies = vec![EnergyEval::default(); n_lanes];
+    let mut px: Vec<f64> = Vec::with_capacity(n_lanes * np);
+    loop {
+        // Record finished frames; hand out segments (in queue order); start next frames.
+        for lane in lanes.iter_mut() {
+            let Next::Done(stats) = lane.next else { continue };
+            if lane.it.take().is_some() {
+                results[lane.frame] = Some((lane.p.clone(), stats, lane.started.elapsed().as_secs_f64()));
+                if stats.status != FrameStatus::TooFewMarkers {
+                    let old = lane.prev2.take();
+                    lane.prev2 = lane.prev.take();
+                    let mut p = old.unwrap_or_default();
+                    p.clone_from(&lane.p);
+                    lane.prev = Some(p);
+                }
+                lane.frame += 1;
+            }
+            if lane.seg.is_none_or(|(_, b)| lane.frame >= b) {
+                lane.seg = queue.pop_front();
+                lane.prev = None;
+                lane.prev2 = None;
+                if let Some((a, _)) = lane.seg {
+                    lane.frame = a;
+                }
+            }
+        }
+        lanes.par_iter_mut().filter(|l| l.seg.is_some() && l.it.is_none()).for_each(|l| l.start_frame(inp, stride));
+        if lanes.iter().all(|l| l.seg.is_none()) {
+            break;
+        }
+
+        // One batched linearisation, then the QPs.
+        let k = batch(
+            &lanes,
+            |n| matches!(n, Next::Linearize),
+            inp,
+            stride,
+            &mut px,
+            |l| &l.p,
+            |f, p| backend.linearize(f, p, &mut models[..f.len()]),
+        )?;
+        if k > 0 {
+            let mut active: Vec<&mut Lane<'_>> =
+                lanes.iter_mut().filter(|l| matches!(l.next, Next::Linearize)).collect();
+            active.par_iter_mut().zip(models[..k].par_iter_mut()).for_each(|(l, m)| {
+                std::mem::swap(&mut l.solver.gn, &mut m.gn);
+                let it = l.it.as_mut().expect("a lane that needs an evaluation is iterating");
+                l.next = l.solver.linearized(it, &l.p);
+            });
+        }
+        // One batched energy evaluation of the trial points, then accept or reject.
+        let k = batch(
+            &lanes,
+            |n| matches!(n, Next::Energy),
+            inp,
+            stride,
+            &mut px,
+            |l| l.solver.trial(),
+            |f, p| backend.energy(f, p, &mut energies[..f.len()]),
+        )?;
+        if k > 0 {
+            let mut active: Vec<&mut Lane<'_>> = lanes.iter_mut().filter(|l| matches!(l.next, Next::Energy)).collect();
+            active.par_iter_mut().zip(energies[..k].par_iter()).for_each(|(l, e)| {
+                let it = l.it.as_mut().expect("a lane that needs an evaluation is iterating");
+                l.next = l.solver.evaluated(it, &mut l.p, *e);
+            });
+        }
+    }
+    Ok(results)
+}
+
+/// Gathers the lanes that need `what` into one batch and evaluates it; returns its size.
+fn batch<'l>(
+    lanes: &'l [Lane<'_>],
+    what: impl Fn(&Next) -> bool,
+    inp: &TrialInputs<'l>,
+    stride: usize,
+    px: &mut Vec<f64>,
+    point: impl Fn(&'l Lane<'_>) -> &'l [f64],
+    mut eval: impl FnMut(&[FrameProblem<'_>], &[f64]) -> Result<(), BackendError>,
+) -> Result<usize, BackendError> {
+    px.clear();
+    let mut frames = Vec::new();
+    for l in lanes.iter().filter(|l| what(&l.next)) {
+        frames.push(l.frame_problem(inp, stride));
+        px.extend_from_slice(point(l));
+    }
+    if !frames.is_empty() {
+        eval(&frames, px)?;
+    }
+    Ok(frames.len())
+}
+
+fn idle_stats() -> FrameStats {
+    FrameStats {
+        iterations: 0,
+        accepted: 0,
+        energy: f64::NAN,
+        rmse_m: f64::NAN,
+        markers_used: 0,
+        status: FrameStatus::TooFewMarkers,
+    }
+}
