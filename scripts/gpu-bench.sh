@@ -2,7 +2,7 @@
 # GPU benchmark for BENCHMARKS.md (issue 5). Run from the repository root on the GPU machine with a
 # prebuilt release binary (cargo build --release); needs no network.
 #   bash scripts/gpu-bench.sh            # writes results to stdout and to $OUT (or ./gpu-bench-out)
-# Measures: batched linearize/energy throughput of the shipped model at 1k/10k/100k frames per call
+# Each command is capped at 180 s. Measures: batched linearize/energy throughput of the shipped model at 1k/10k/100k frames per call
 # on cpu and wgpu, and whole-solve frames/s of a 100k-frame synthetic trial on both backends.
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -14,13 +14,16 @@ mkdir -p "$OUTDIR"
   echo "# date: $(date -u +%Y-%m-%dT%H:%MZ)"
   echo "# host: $(uname -srm), $(nproc) cores"
   command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader
-  for b in cpu wgpu; do
-    "$BIN" bench-batch --backend "$b" --sizes 1000,10000,100000 --repeats 5 || echo "bench-batch $b failed: $?"
+  timeout 180 "$BIN" bench-batch --backend cpu --sizes 1000,10000,100000 --repeats 5 || echo "bench-batch cpu failed: $?"
+  # wgpu: the default 32k frames per dispatch, then 128k (more invocations resident on a big GPU).
+  for cap in 32768 131072; do
+    timeout 180 "$BIN" bench-batch --backend wgpu --cap "$cap" --sizes 1000,10000,100000 --repeats 5 \
+      || echo "bench-batch wgpu --cap $cap failed: $?"
   done
   for b in cpu wgpu; do
-    for lanes in 1000 4000; do
+    for lanes in 250 1000; do
       echo "# whole solve: demo --frames 100000 --backend $b --lanes $lanes"
-      "$BIN" demo --frames 100000 --backend "$b" --lanes "$lanes" 2>&1 | tail -5 \
+      timeout 180 "$BIN" demo --frames 100000 --backend "$b" --lanes "$lanes" 2>&1 | tail -5 \
         || echo "demo $b failed: $?"
     done
   done

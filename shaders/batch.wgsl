@@ -2,9 +2,10 @@
 // The mirror of src/kinematics/{cpu,assembly}.rs and src/model/proxy.rs in f32; see
 // docs/KINEMATICS.md for the math and src/kinematics/wgpu/layout.rs for the buffer layouts.
 //
-// The host prepends a header of `const` declarations (sizes and section offsets of one model and
-// one chunk capacity `CAP`). Per-frame arrays are structure-of-arrays: entry `row` of frame `f`
-// lives at `row * CAP + f`, so neighbouring invocations touch neighbouring words.
+// The host prepends a header of `const` declarations (sizes and section offsets of one model, and
+// the chunk capacity `CAP` the buffers hold). Per-frame arrays are structure-of-arrays: entry `row`
+// of frame `f` lives at `row * params.stride + f` (the chunk's frame count rounded up to a
+// workgroup), so neighbouring invocations touch neighbouring words and a small chunk moves little.
 //
 // Positions are relative to a per-frame reference point `c` (subtracted in f64 on the host), so
 // that f32 carries the body-scale differences rather than lab-scale coordinates; Jacobian rows
@@ -14,7 +15,8 @@
 struct Params {
     // Frames in this chunk (≤ CAP).
     n: u32,
-    pad0: u32,
+    // Structure-of-arrays stride of this chunk (≤ CAP).
+    stride: u32,
     pad1: u32,
     pad2: u32,
 }
@@ -29,7 +31,7 @@ struct Params {
 const NONE: u32 = 0xffffffffu;
 
 fn at(row: u32, f: u32) -> u32 {
-    return row * CAP + f;
+    return row * params.stride + f;
 }
 
 fn mf3(i: u32) -> vec3<f32> {

@@ -24,17 +24,23 @@ pub struct BenchArgs {
     /// Distinct synthetic frames, tiled up to the batch size.
     #[arg(long, default_value_t = 2000)]
     pub distinct: usize,
+    /// wgpu only: frames per dispatch (capped by the adapter's binding limits).
+    #[arg(long, default_value_t = crate::kinematics::gpu::DEFAULT_CAP)]
+    pub cap: usize,
 }
 
 pub fn run(a: BenchArgs) -> anyhow::Result<u8> {
     let ctx = Context::shipped()?;
     let eval = ctx.evaluator();
-    let mut chosen = choose(a.backend, &eval)?;
+    let mut chosen = choose(a.backend, &eval, a.cap)?;
     if let Some(note) = chosen.note() {
         eprintln!("note: {note}");
     }
     let mut cpu = CpuBackend::new(eval.clone());
-    let device = chosen.device();
+    let device = match &chosen {
+        Chosen::Wgpu(b) => format!("{}, {} frames per dispatch", chosen.device(), b.chunk_capacity()),
+        _ => chosen.device(),
+    };
     let backend: &mut dyn BatchBackend = match &mut chosen {
         Chosen::Cpu { .. } => &mut cpu,
         Chosen::Wgpu(b) => b.as_mut(),

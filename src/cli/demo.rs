@@ -25,6 +25,7 @@ pub struct DemoArgs {
 pub fn run(a: DemoArgs) -> anyhow::Result<u8> {
     let ctx = Context::shipped()?;
     let threads = a.threads.unwrap_or_else(super::default_threads).max(1);
+    let (mut chosen, lanes) = a.backend.choose(&ctx, threads)?;
     let opt = SynthOptions { frames: a.frames, seed: a.seed, noise_m: a.noise_mm * 1e-3, ..SynthOptions::default() };
     println!(
         "smocap demo: shipped model '{}' ({} coordinates, {} bodies, {} markers, {} proxies), {} synthetic frames at {} Hz, {} mm noise, seed {}",
@@ -47,7 +48,6 @@ pub fn run(a: DemoArgs) -> anyhow::Result<u8> {
         t0.elapsed().as_secs_f64() * 1e3,
         cal.rmse_m * 1e3
     );
-    let (mut chosen, lanes) = a.backend.choose(&ctx, threads)?;
     let r = solve_trial_with(&ctx, "demo", &s.trial, &cal, threads, lanes, chosen.backend())?;
     let mut report = Report::new(&ctx, threads);
     report.set_backend(&chosen, lanes);

@@ -114,7 +114,7 @@ impl BackendArgs {
         threads: usize,
     ) -> anyhow::Result<(crate::pipeline::device::Chosen, usize)> {
         use crate::pipeline::device::{choose, Chosen};
-        let chosen = choose(self.backend, &ctx.evaluator())?;
+        let chosen = choose(self.backend, &ctx.evaluator(), crate::kinematics::gpu::DEFAULT_CAP)?;
         if let Some(note) = chosen.note() {
             eprintln!("note: {note}");
         }

@@ -64,11 +64,12 @@ impl Chosen {
     }
 }
 
-/// Picks the backend for `eval`'s model. Errors only for `wgpu` without a usable adapter.
-pub fn choose(choice: BackendChoice, eval: &Evaluator<'_>) -> Result<Chosen, BackendError> {
+/// Picks the backend for `eval`'s model, with at most `cap` frames per wgpu dispatch. Errors only
+/// for `wgpu` without a usable adapter.
+pub fn choose(choice: BackendChoice, eval: &Evaluator<'_>, cap: usize) -> Result<Chosen, BackendError> {
     match choice {
         BackendChoice::Cpu => Ok(Chosen::Cpu { note: None }),
-        BackendChoice::Wgpu => Ok(Chosen::Wgpu(Box::new(WgpuBackend::new(eval, gpu::DEFAULT_CAP)?))),
+        BackendChoice::Wgpu => Ok(Chosen::Wgpu(Box::new(WgpuBackend::new(eval, cap)?))),
         BackendChoice::Auto => {
             let adapters = gpu::list_adapters();
             let Some(best) = adapters.first() else {
@@ -87,7 +88,7 @@ pub fn choose(choice: BackendChoice, eval: &Evaluator<'_>) -> Result<Chosen, Bac
                     )),
                 });
             }
-            match WgpuBackend::new(eval, gpu::DEFAULT_CAP) {
+            match WgpuBackend::new(eval, cap) {
                 Ok(b) => Ok(Chosen::Wgpu(Box::new(b))),
                 Err(e) => Ok(Chosen::Cpu {
                     note: Some(format!("backend auto: {best} could not be used ({e}); using the CPU backend")),

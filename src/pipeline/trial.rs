@@ -40,7 +40,8 @@ pub struct TrialResult {
     pub proxies: Vec<Vec<f64>>,
     /// Per-frame statistics (bridged frames have status `TooFewMarkers`).
     pub stats: Vec<FrameStats>,
-    /// Per-frame solve time (s), I/O excluded.
+    /// Per-frame solve time (s), I/O excluded: wall time from the frame's start to its end in its
+    /// lane, which includes waiting for the other frames of its batched evaluations.
     pub frame_seconds: Vec<f64>,
     pub calibration: Calibration,
     /// Frames bridged from neighbours because too few markers were observed.

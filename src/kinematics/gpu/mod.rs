@@ -16,8 +16,11 @@ use std::sync::{Arc, Mutex};
 /// The shader source; `pack::Packed::header` is prepended at pipeline creation.
 pub const SHADER: &str = include_str!("../../../shaders/batch.wgsl");
 
-/// Frames per chunk when the adapter's limits allow it.
-pub const DEFAULT_CAP: usize = 16_384;
+/// Frames per chunk when the adapter's limits allow it. One invocation evaluates one frame, so a
+/// large GPU needs many frames per dispatch to be busy (an H100 keeps ~270k invocations resident);
+/// device memory is about 27 KB per frame of capacity on the shipped model (input, scratch,
+/// output and two read-back buffers).
+pub const DEFAULT_CAP: usize = 32_768;
 
 /// What an adapter is, for choosing and for run metadata.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -284,8 +287,8 @@ impl WgpuBackend {
             cap,
             np: eval.proxy.np(),
             nm: eval.model.markers.len(),
-            host_in: vec![0.0; cap * rows.input],
-            host_out: vec![0.0; cap * rows.output],
+            host_in: Vec::new(),
+            host_out: Vec::new(),
             refs: [vec![[0.0; 3]; cap], vec![[0.0; 3]; cap]],
             errors,
         })
@@ -295,9 +298,12 @@ impl WgpuBackend {
         BackendError::Device { adapter: self.adapter.name.clone(), message }
     }
 
-    /// Packs frames into `host_in` (structure of arrays, stride `cap`).
+    /// Packs frames into `host_in` (structure of arrays, stride [`stride`]).
     fn pack_chunk(&mut self, frames: &[FrameProblem<'_>], proxies: &[f64], slot: usize) {
-        let (cap, r, np) = (self.cap, self.rows, self.np);
+        let (cap, r, np) = (stride(frames.len()), self.rows, self.np);
+        if self.host_in.len() < cap * r.input {
+            self.host_in.resize(cap * r.input, 0.0);
+        }
         let hi = &mut self.host_in;
         for (i, fr) in frames.iter().enumerate() {
             let used = |m: usize| {
@@ -339,9 +345,10 @@ impl WgpuBackend {
     /// `rows` output rows into staging buffer `slot`.
     fn submit(&mut self, slot: usize, n: usize, linearize: bool) -> Pending {
         let rows = if linearize { self.rows.output } else { 3 };
+        let st = stride(n);
         // Queue writes are ordered after earlier submissions, so the chunk in flight keeps its data.
-        self.queue.write_buffer(&self.input, 0, bytemuck::cast_slice(&self.host_in));
-        self.queue.write_buffer(&self.params, 0, bytemuck::cast_slice(&[n as u32, 0, 0, 0]));
+        self.queue.write_buffer(&self.input, 0, bytemuck::cast_slice(&self.host_in[..st * self.rows.input]));
+        self.queue.write_buffer(&self.params, 0, bytemuck::cast_slice(&[n as u32, st as u32, 0, 0]));
         let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("chunk") });
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
@@ -349,14 +356,14 @@ impl WgpuBackend {
             pass.set_bind_group(0, &self.bind_group, &[]);
             pass.dispatch_workgroups(n.div_ceil(64) as u32, 1, 1);
         }
-        let bytes = (4 * rows * self.cap) as u64;
+        let bytes = (4 * rows * st) as u64;
         enc.copy_buffer_to_buffer(&self.output, 0, &self.staging[slot], 0, bytes);
         let index = self.queue.submit([enc.finish()]);
         let (tx, rx) = std::sync::mpsc::channel();
         self.staging[slot].slice(..bytes).map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
         });
-        Pending { slot, rows, index, rx }
+        Pending { slot, rows, stride: st, index, rx }
     }
 
     /// Waits for a submitted chunk and copies its results into `host_out`.
@@ -369,10 +376,13 @@ impl WgpuBackend {
             Ok(Err(e)) => return Err(self.fail(format!("mapping the results: {e}"))),
             Err(_) => return Err(self.fail("the results were never mapped".into())),
         }
-        let words = p.rows * self.cap;
+        let words = p.rows * p.stride;
         {
             let slice = self.staging[p.slot].slice(..(4 * words) as u64);
             let view = slice.get_mapped_range().map_err(|e| self.fail(format!("reading the results: {e:?}")))?;
+            if self.host_out.len() < words {
+                self.host_out.resize(words, 0.0);
+            }
             self.host_out[..words].copy_from_slice(bytemuck::cast_slice(&view));
         }
         self.staging[p.slot].unmap();
@@ -389,7 +399,7 @@ impl WgpuBackend {
         frames: &[FrameProblem<'_>],
         proxies: &[f64],
         linearize: bool,
-        mut unpack: impl FnMut(std::ops::Range<usize>, &WgpuBackend, usize),
+        mut unpack: impl FnMut(std::ops::Range<usize>, &WgpuBackend, usize, usize),
     ) -> Result<(), BackendError> {
         let (n, cap, np) = (frames.len(), self.cap, self.np);
         let mut in_flight: Option<(Pending, std::ops::Range<usize>)> = None;
@@ -399,24 +409,31 @@ impl WgpuBackend {
             self.pack_chunk(&frames[a..b], &proxies[a * np..b * np], slot);
             let pending = self.submit(slot, b - a, linearize);
             if let Some((p, range)) = in_flight.replace((pending, a..b)) {
-                let s = p.slot;
+                let (s, st) = (p.slot, p.stride);
                 self.finish(p)?;
-                unpack(range, self, s);
+                unpack(range, self, s, st);
             }
         }
         if let Some((p, range)) = in_flight {
-            let s = p.slot;
+            let (s, st) = (p.slot, p.stride);
             self.finish(p)?;
-            unpack(range, self, s);
+            unpack(range, self, s, st);
         }
         Ok(())
     }
+}
+
+/// Structure-of-arrays stride of a chunk of `n` frames: `n` rounded up to a workgroup.
+fn stride(n: usize) -> usize {
+    n.div_ceil(64) * 64
 }
 
 /// A chunk submitted and being read back.
 struct Pending {
     slot: usize,
     rows: usize,
+    /// Structure-of-arrays stride of this chunk.
+    stride: usize,
     index: wgpu::SubmissionIndex,
     rx: std::sync::mpsc::Receiver<Result<(), wgpu::BufferAsyncError>>,
 }
@@ -438,8 +455,8 @@ impl BatchBackend for WgpuBackend {
     ) -> Result<(), BackendError> {
         let np = self.np;
         check_shape(frames.len(), proxies.len(), out.len(), np)?;
-        self.run(frames, proxies, true, |range, me, slot| {
-            let (r, cap, ho, refs) = (me.rows, me.cap, &me.host_out, &me.refs[slot]);
+        self.run(frames, proxies, true, |range, me, slot, cap| {
+            let (r, ho, refs) = (me.rows, &me.host_out, &me.refs[slot]);
             out[range].par_iter_mut().enumerate().for_each(|(i, o)| {
                 let gn = &mut o.gn;
                 gn.energy = ho[i] as f64;
@@ -472,8 +489,8 @@ impl BatchBackend for WgpuBackend {
         out: &mut [EnergyEval],
     ) -> Result<(), BackendError> {
         check_shape(frames.len(), proxies.len(), out.len(), self.np)?;
-        self.run(frames, proxies, false, |range, me, _| {
-            let (cap, ho) = (me.cap, &me.host_out);
+        self.run(frames, proxies, false, |range, me, _, cap| {
+            let ho = &me.host_out;
             for (i, o) in out[range].iter_mut().enumerate() {
                 *o = EnergyEval {
                     energy: ho[i] as f64,
