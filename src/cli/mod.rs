@@ -3,7 +3,9 @@
 //! Exit codes: 0 all ok; 1 an error stopped the command (bad input, I/O); 2 usage error;
 //! 3 the command ran but some trials failed (see the report).
 
+mod convert;
 mod demo;
+mod inspect;
 mod markers;
 mod solve;
 mod synth;
@@ -31,6 +33,10 @@ pub enum Command {
     Solve(solve::SolveArgs),
     /// What a marker file holds: frames, rate, units, labels, gaps per label, time span.
     Markers(markers::MarkersArgs),
+    /// Convert whole archives (datasets.toml) to one MCAP file per trial, each subject calibrated once.
+    Convert(convert::ConvertArgs),
+    /// What a converted MCAP file holds: channels, message counts, run metadata, attachments.
+    Inspect(inspect::InspectArgs),
 }
 
 /// Runs the command line; errors are printed with their causes.
@@ -41,6 +47,8 @@ pub fn main() -> ExitCode {
         Command::Synth(a) => synth::run(a),
         Command::Solve(a) => solve::run(a),
         Command::Markers(a) => markers::run(a),
+        Command::Convert(a) => convert::run(a),
+        Command::Inspect(a) => inspect::run(a),
     };
     match result {
         Ok(code) => ExitCode::from(code),
@@ -70,23 +78,13 @@ pub(crate) fn load_context_with_markers(
     marker_set: Option<&std::path::Path>,
     profile: Option<&std::path::Path>,
 ) -> anyhow::Result<crate::pipeline::Context> {
-    use crate::pipeline::Context;
-    Ok(match model {
-        None if profile.is_none() => Context::shipped()?,
-        None => {
-            let m = crate::io::mjcf::parse_mjcf(crate::pipeline::context::SHIPPED_MODEL, "models/fullbody.xml")?;
-            let path = profile.unwrap_or(std::path::Path::new(""));
-            let prof = crate::model::profile::Profile::read(path)?;
-            Context::new(m, prof, &path.display().to_string(), "shipped:models/fullbody.xml".into())?
+    let ctx = crate::pipeline::subject::load_context(model, marker_set, profile)?;
+    if model.is_some() {
+        for w in &ctx.warnings {
+            eprintln!("warning: {w}");
         }
-        Some(m) => {
-            let ctx = Context::from_files_with_markers(m, marker_set, profile)?;
-            for w in &ctx.warnings {
-                eprintln!("warning: {w}");
-            }
-            ctx
-        }
-    })
+    }
+    Ok(ctx)
 }
 
 /// Default thread count: the machine's available parallelism.

@@ -9,6 +9,7 @@ pub mod ik_tasks;
 pub mod matching;
 pub mod report;
 pub mod stats;
+pub mod subject;
 pub mod trial;
 
 pub use context::{Context, ContextError};
