@@ -4,7 +4,9 @@
 //! 3 the command ran but some trials failed (see the report).
 
 mod bench;
+mod convert;
 mod demo;
+mod inspect;
 mod markers;
 mod solve;
 mod synth;
@@ -34,6 +36,10 @@ pub enum Command {
     Markers(markers::MarkersArgs),
     /// Batched evaluation throughput (frame-evaluations/s) of the shipped model per batch size.
     BenchBatch(bench::BenchArgs),
+    /// Convert whole archives (datasets.toml) to one MCAP file per trial, each subject calibrated once.
+    Convert(convert::ConvertArgs),
+    /// What a converted MCAP file holds: channels, message counts, run metadata, attachments.
+    Inspect(inspect::InspectArgs),
 }
 
 /// Runs the command line; errors are printed with their causes.
@@ -46,6 +52,8 @@ pub fn main() -> ExitCode {
         Command::Solve(a) => solve::run(a),
         Command::Markers(a) => markers::run(a),
         Command::BenchBatch(a) => bench::run(a),
+        Command::Convert(a) => convert::run(a),
+        Command::Inspect(a) => inspect::run(a),
     };
     match result {
         Ok(code) => ExitCode::from(code),
@@ -75,23 +83,13 @@ pub(crate) fn load_context_with_markers(
     marker_set: Option<&std::path::Path>,
     profile: Option<&std::path::Path>,
 ) -> anyhow::Result<crate::pipeline::Context> {
-    use crate::pipeline::Context;
-    Ok(match model {
-        None if profile.is_none() => Context::shipped()?,
-        None => {
-            let m = crate::io::mjcf::parse_mjcf(crate::pipeline::context::SHIPPED_MODEL, "models/fullbody.xml")?;
-            let path = profile.unwrap_or(std::path::Path::new(""));
-            let prof = crate::model::profile::Profile::read(path)?;
-            Context::new(m, prof, &path.display().to_string(), "shipped:models/fullbody.xml".into())?
+    let ctx = crate::pipeline::subject::load_context(model, marker_set, profile)?;
+    if model.is_some() {
+        for w in &ctx.warnings {
+            eprintln!("warning: {w}");
         }
-        Some(m) => {
-            let ctx = Context::from_files_with_markers(m, marker_set, profile)?;
-            for w in &ctx.warnings {
-                eprintln!("warning: {w}");
-            }
-            ctx
-        }
-    })
+    }
+    Ok(ctx)
 }
 
 /// Evaluation backend options shared by `solve` and `demo`.

@@ -1,7 +1,8 @@
 //! `smocap solve`: calibrate a subject, then solve its trials.
 
 use crate::pipeline::report::{trial_report, Report};
-use crate::pipeline::{calibrate_subject, solve_trial_with};
+use crate::pipeline::solve_trial_with;
+use crate::pipeline::subject::{calibrate_placed, prepare_subject, Subject, SubjectFiles};
 use crate::solve::QpBackend;
 use crate::synth::Truth;
 use anyhow::Context as _;
@@ -68,74 +69,32 @@ pub struct SolveArgs {
     pub backend: super::BackendArgs,
 }
 
-/// Applies `--ik-setup` to the context, printing what it did.
-fn apply_ik_setup(ctx: &mut crate::pipeline::Context, path: &std::path::Path) -> anyhow::Result<()> {
-    let setup = crate::io::osim::read_ik_setup(path)?;
-    let done = ctx.apply_ik_setup(&setup)?;
-    for w in setup.warnings.iter().chain(&done.warnings) {
-        eprintln!("warning: {w}");
-    }
-    eprintln!(
-        "{}: {} markers weighted, {} without a task (unused, as in OpenSim), {} coordinate targets; its time range and files are not used",
-        path.display(),
-        done.markers_weighted,
-        done.markers_without_task.len(),
-        done.coordinate_targets
-    );
-    Ok(())
-}
-
 /// Reads a marker file and brings it into the model's units and up axis, saying what was done.
 fn read_trial(
     ctx: &crate::pipeline::Context,
     path: &std::path::Path,
     opt: &crate::pipeline::convention::InputOptions,
 ) -> anyhow::Result<(crate::io::MarkerTrial, crate::pipeline::convention::InputConventions)> {
-    let mut t = crate::io::read_markers(path)?;
-    let conv = crate::pipeline::convention::conform_trial(ctx, &mut t, opt);
+    let (t, conv) = crate::pipeline::subject::read_trial(ctx, path, opt)?;
     eprintln!("{}: {}", path.display(), conv.summary());
     Ok((t, conv))
 }
 
 pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
     anyhow::ensure!(a.markerset.is_none() || a.model.is_some(), "--markerset needs --model");
-    let setup = match &a.scale_setup {
-        Some(p) => Some(crate::io::osim::read_scale_setup(p)?),
-        None => None,
+    let files = SubjectFiles {
+        model: a.model.clone(),
+        markerset: a.markerset.clone(),
+        profile: a.profile.clone(),
+        scale_setup: a.scale_setup.clone(),
+        ik_setup: a.ik_setup.clone(),
+        static_trial: a.static_trial.clone(),
+        place_markers: a.place_markers,
+        qp: a.qp,
     };
-    let markerset = a.markerset.clone().or_else(|| setup.as_ref().and_then(|s| s.marker_set_file.clone()));
-    let static_path = match (&a.static_trial, setup.as_ref().and_then(|s| s.static_file.clone())) {
-        (Some(p), _) => Some(p.clone()),
-        (None, Some(p)) if p.exists() => Some(p),
-        (None, Some(p)) => anyhow::bail!(
-            "the scale setup's static trial {} does not exist; give the static trial with --static",
-            p.display()
-        ),
-        (None, None) => None,
-    };
-    let mut ctx = super::load_context_with_markers(a.model.as_deref(), markerset.as_deref(), a.profile.as_deref())?;
-    if let (Some(s), Some(p)) = (&setup, &a.scale_setup) {
-        let before = ctx.warnings.len();
-        ctx = ctx.with_scale_setup(s, &p.display().to_string())?;
-        for w in &ctx.warnings[before..] {
-            eprintln!("warning: {w}");
-        }
-    }
-    if a.place_markers {
-        ctx.settings.marker_placement = true;
-    }
-    if let Some(qp) = a.qp {
-        ctx.settings.qp = crate::solve::backend_for(qp, &ctx.proxy);
-        if ctx.settings.qp != qp {
-            eprintln!("note: the profile has general linear constraints, which only the clarabel QP backend solves");
-        }
-    }
-    if let Some(p) = &a.ik_setup {
-        apply_ik_setup(&mut ctx, p)?;
-    }
-    // Without a static trial, calibration runs on the motion frames with the motion weights.
-    if static_path.is_none() {
-        ctx.calibration_weights = ctx.marker_weights.clone();
+    let Subject { mut ctx, static_path, notes } = prepare_subject(&files)?;
+    for n in &notes {
+        eprintln!("{n}");
     }
     let input_opt = crate::pipeline::convention::InputOptions { up: a.up, units: a.units };
     let threads = a.threads.unwrap_or_else(super::default_threads).max(1);
@@ -172,14 +131,17 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         (Some(p), Some(st)) => vec![(p.to_str().unwrap_or("static"), st)],
         _ => loaded.iter().map(|(n, t, _)| (n.as_str(), t)).collect(),
     };
-    let calibration =
-        if calibration_input.is_empty() { None } else { Some(calibrate_subject(&ctx, &calibration_input)) };
-    // Marker placement moved the subject's markers: solve with them.
-    if let Some(Ok(c)) = &calibration {
-        if let Some(offsets) = &c.marker_offsets {
-            ctx = ctx.with_marker_offsets(offsets)?;
-        }
-    }
+    let calibration = if calibration_input.is_empty() {
+        None
+    } else {
+        Some(calibrate_placed(&ctx, &calibration_input).map(|(c, placed)| {
+            // Marker placement moved the subject's markers: solve with them.
+            if let Some(p) = placed {
+                ctx = p;
+            }
+            c
+        }))
+    };
     // The backend holds the model (on the GPU for wgpu): chosen once the markers are final.
     let (mut chosen, lanes) = a.backend.choose(&ctx, threads)?;
     report.set_backend(&chosen, lanes);

@@ -11,6 +11,7 @@ pub mod lanes;
 pub mod matching;
 pub mod report;
 pub mod stats;
+pub mod subject;
 pub mod trial;
 
 pub use context::{Context, ContextError};

@@ -1,0 +1,152 @@
+//! `datasets.toml`: the archives that `smocap convert` works through.
+//!
+//! ```toml
+//! [[dataset]]
+//! name = "lab"                      # required; outputs go to <out>/<name>/...
+//! root = "data/lab"                 # required (but for synthetic datasets); relative to this file
+//! trials = ["**/*.c3d"]             # required: globs relative to root
+//! subject = "{subject}/{trial}.c3d" # optional: how subject and trial are read from the path
+//! static = "{subject}/static*.c3d"  # optional: the static trial of each subject (glob)
+//! model = "model.osim"              # optional (the shipped model by default), with
+//! markerset, profile, scale_setup, ik_setup, place_markers, qp, units, up
+//! ```
+
+use crate::pipeline::convention::{InputOptions, Units, UpAxis};
+use crate::pipeline::subject::SubjectFiles;
+use crate::solve::QpBackend;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// Errors reading `datasets.toml`.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("{file}: {source}")]
+    Io { file: String, source: std::io::Error },
+    #[error("{file}: {source}")]
+    Toml { file: String, source: toml::de::Error },
+    #[error("{file}: dataset '{name}': {message}")]
+    Invalid { file: String, name: String, message: String },
+    #[error("{file}: no dataset named '{name}' (it has: {valid})")]
+    UnknownDataset { file: String, name: String, valid: String },
+}
+
+/// A synthetic dataset generated on the fly from the shipped model (see [`crate::synth`]).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SyntheticSpec {
+    pub subjects: usize,
+    /// Motion trials per subject (each subject also gets a static trial).
+    pub trials: usize,
+    /// Frames per trial, at 100 Hz.
+    pub frames: usize,
+    #[serde(default = "one")]
+    pub seed: u64,
+}
+
+fn one() -> u64 {
+    1
+}
+
+/// One `[[dataset]]` entry; paths as written (see [`Dataset::resolve`]).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Dataset {
+    pub name: String,
+    /// Root folder of the trials (relative to the toml's folder); for a synthetic dataset, where
+    /// it is generated (default: `<out>/.synthetic/<name>`).
+    pub root: Option<PathBuf>,
+    /// Glob patterns of the motion trials, relative to `root`.
+    pub trials: Vec<String>,
+    /// Path pattern with `{subject}` and `{trial}` placeholders; default: the subject is the
+    /// trial's folder.
+    pub subject: Option<String>,
+    /// Glob of each subject's static trial (`{subject}` is replaced), relative to `root`.
+    #[serde(rename = "static")]
+    pub static_glob: Option<String>,
+    pub model: Option<PathBuf>,
+    pub markerset: Option<PathBuf>,
+    pub profile: Option<PathBuf>,
+    pub scale_setup: Option<PathBuf>,
+    pub ik_setup: Option<PathBuf>,
+    #[serde(default)]
+    pub place_markers: bool,
+    pub qp: Option<QpBackend>,
+    pub units: Option<Units>,
+    pub up: Option<UpAxis>,
+    pub synthetic: Option<SyntheticSpec>,
+}
+
+impl Dataset {
+    /// Resolves relative paths against `base` (the toml's folder).
+    fn resolve(&mut self, base: &Path) {
+        let abs = |p: &mut Option<PathBuf>| {
+            if let Some(x) = p.as_mut().filter(|x| x.is_relative()) {
+                *x = base.join(&*x);
+            }
+        };
+        for p in [&mut self.root, &mut self.model, &mut self.markerset, &mut self.profile] {
+            abs(p);
+        }
+        abs(&mut self.scale_setup);
+        abs(&mut self.ik_setup);
+    }
+
+    /// The subject's files; `static_trial` is the subject's static trial when one was found.
+    pub fn subject_files(&self, static_trial: Option<PathBuf>) -> SubjectFiles {
+        SubjectFiles {
+            model: self.model.clone(),
+            markerset: self.markerset.clone(),
+            profile: self.profile.clone(),
+            scale_setup: self.scale_setup.clone(),
+            ik_setup: self.ik_setup.clone(),
+            static_trial,
+            place_markers: self.place_markers,
+            qp: self.qp,
+        }
+    }
+
+    pub fn input_options(&self) -> InputOptions {
+        InputOptions { up: self.up, units: self.units }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct File {
+    dataset: Vec<Dataset>,
+}
+
+/// Reads `path`, resolving relative paths against its folder; `only` keeps one dataset by name.
+pub fn read_datasets(path: &Path, only: Option<&str>) -> Result<Vec<Dataset>, ConfigError> {
+    let file = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io { file: file.clone(), source })?;
+    let parsed: File = toml::from_str(&text).map_err(|source| ConfigError::Toml { file: file.clone(), source })?;
+    let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let mut out = Vec::new();
+    for mut d in parsed.dataset {
+        let invalid =
+            |message: &str| ConfigError::Invalid { file: file.clone(), name: d.name.clone(), message: message.into() };
+        if d.trials.is_empty() {
+            return Err(invalid("`trials` needs at least one glob"));
+        }
+        if d.root.is_none() && d.synthetic.is_none() {
+            return Err(invalid("`root` is required (but for synthetic datasets)"));
+        }
+        if out.iter().any(|o: &Dataset| o.name == d.name) {
+            return Err(invalid("two datasets have this name"));
+        }
+        d.resolve(base);
+        out.push(d);
+    }
+    match only {
+        None => Ok(out),
+        Some(name) => match out.iter().position(|d| d.name == name) {
+            Some(i) => Ok(vec![out.swap_remove(i)]),
+            None => Err(ConfigError::UnknownDataset {
+                file,
+                name: name.into(),
+                valid: out.iter().map(|d| d.name.as_str()).collect::<Vec<_>>().join(", "),
+            }),
+        },
+    }
+}

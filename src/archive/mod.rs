@@ -1,0 +1,20 @@
+//! Whole archives: `datasets.toml` ([`config`]), finding trials by subject ([`discover`]),
+//! splitting them between cluster jobs ([`shard`]), converting each subject (calibrated once) to
+//! one MCAP file per trial ([`convert`], [`mcap_out`]), and reading those files back ([`inspect`]).
+
+pub mod config;
+pub mod convert;
+pub mod discover;
+pub mod inspect;
+pub mod mcap_out;
+pub mod schemas;
+pub mod shard;
+pub mod synthetic;
+
+pub use convert::{convert, ConvertOptions, ConvertSummary, TrialOutcome};
+
+/// SHA-256 of a byte string, lowercase hex.
+pub fn sha256_hex(data: &[u8]) -> String {
+    use sha2::{Digest, Sha256};
+    Sha256::digest(data).iter().map(|b| format!("{b:02x}")).collect()
+}

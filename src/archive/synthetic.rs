@@ -1,0 +1,53 @@
+//! The embedded synthetic dataset: subjects of the shipped model, each with a static trial and
+//! motion trials cut from one continuous synthetic motion (so a subject keeps its morphology and
+//! marker misplacement across trials). Deterministic for a seed.
+
+use super::config::SyntheticSpec;
+use crate::io::{trc, MarkerTrial};
+use crate::pipeline::Context;
+use crate::synth::{synthesize, SynthOptions};
+use std::path::Path;
+
+/// Frames `a..b` of `t`, times starting at 0.
+fn cut(t: &MarkerTrial, a: usize, b: usize) -> MarkerTrial {
+    let w = 3 * t.n_markers();
+    let t0 = t.times[a];
+    MarkerTrial {
+        labels: t.labels.clone(),
+        rate_hz: t.rate_hz,
+        times: t.times[a..b].iter().map(|x| x - t0).collect(),
+        frame_numbers: (1..=(b - a) as i64).collect(),
+        positions: t.positions[a * w..b * w].to_vec(),
+        source_units: t.source_units.clone(),
+        warnings: Vec::new(),
+    }
+}
+
+/// Writes the dataset under `root` as `subjNN/static.trc` and `subjNN/walkNN.trc` (mm), unless
+/// `root/.complete` says it was written with the same spec.
+pub fn generate(spec: &SyntheticSpec, root: &Path) -> anyhow::Result<()> {
+    let stamp = format!("{spec:?}");
+    let marker = root.join(".complete");
+    if std::fs::read_to_string(&marker).is_ok_and(|s| s == stamp) {
+        return Ok(());
+    }
+    let ctx = Context::shipped()?;
+    for s in 0..spec.subjects {
+        let n = spec.frames.max(1);
+        let opt = SynthOptions {
+            frames: n * (spec.trials + 1),
+            seed: spec.seed.wrapping_mul(1000).wrapping_add(s as u64),
+            misplace_m: 0.005,
+            ..SynthOptions::default()
+        };
+        let syn = synthesize(&ctx.model, &ctx.proxy, &opt);
+        let dir = root.join(format!("subj{:02}", s + 1));
+        std::fs::create_dir_all(&dir)?;
+        for k in 0..=spec.trials {
+            let name = if k == 0 { "static.trc".to_string() } else { format!("walk{k:02}.trc") };
+            trc::write_trc(&dir.join(name), &cut(&syn.trial, k * n, (k + 1) * n), "mm")?;
+        }
+    }
+    std::fs::write(marker, stamp)?;
+    Ok(())
+}

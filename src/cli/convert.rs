@@ -1,0 +1,64 @@
+//! `smocap convert`: whole archives described by `datasets.toml` to MCAP files.
+
+use crate::archive::config::read_datasets;
+use crate::archive::shard::Shard;
+use crate::archive::{convert, ConvertOptions};
+use anyhow::Context as _;
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct ConvertArgs {
+    /// The datasets file.
+    #[arg(default_value = "datasets.toml")]
+    pub datasets: PathBuf,
+    /// Convert only the dataset with this name.
+    #[arg(long)]
+    pub dataset: Option<String>,
+    /// Output folder: `<out>/<dataset>/<trial path>.mcap`, mirroring each dataset's tree.
+    #[arg(long, default_value = "smocap-out")]
+    pub out: PathBuf,
+    /// Parallel workers (subjects and trials); the machine's parallelism by default.
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// Convert only shard I of N (0-based; subjects kept whole, balanced by frame count). When
+    /// absent, read from SLURM_ARRAY_TASK_ID/SLURM_ARRAY_TASK_COUNT or
+    /// JOB_COMPLETION_INDEX/SMOCAP_SHARD_COUNT.
+    #[arg(long)]
+    pub shard: Option<Shard>,
+    /// Skip trials whose output exists and records the same input SHA-256.
+    #[arg(long)]
+    pub resume: bool,
+    /// Write the summary (every trial found, with its status) as JSON here.
+    #[arg(long)]
+    pub report_json: Option<PathBuf>,
+}
+
+pub fn run(a: ConvertArgs) -> anyhow::Result<u8> {
+    let datasets = read_datasets(&a.datasets, a.dataset.as_deref())?;
+    let shard = match a.shard {
+        Some(s) => Some(s),
+        None => Shard::from_env(|k| std::env::var(k).ok())?,
+    };
+    let opt = ConvertOptions {
+        out: a.out.clone(),
+        jobs: a.jobs.unwrap_or_else(super::default_threads).max(1),
+        shard,
+        resume: a.resume,
+    };
+    let summary = convert(&datasets, &opt, &|line| eprintln!("{line}"));
+    print!("{}", summary.table());
+    if let Some(p) = &a.report_json {
+        std::fs::write(p, serde_json::to_string_pretty(&summary)?)
+            .with_context(|| format!("writing {}", p.display()))?;
+    }
+    let failed = summary.failed();
+    if failed > 0 {
+        eprintln!("{failed} of {} trials failed:", summary.trials.len());
+        for t in summary.trials.iter().filter(|t| t.status == "failed") {
+            eprintln!("  {}/{}: {}", t.dataset, t.trial, t.error.as_deref().unwrap_or(""));
+        }
+        return Ok(super::EXIT_SOME_FAILED);
+    }
+    Ok(0)
+}
