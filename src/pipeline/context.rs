@@ -173,8 +173,8 @@ impl Context {
 
     /// The subject set up as an OpenSim Scale tool setup says: its scale groups replace the
     /// profile's, marker placement follows its `MarkerPlacer`, and the placer's task weights
-    /// weight the static trial (markers without a task keep their weight). Bodies named by a
-    /// group that the model lacks are an error naming the valid bodies.
+    /// weight the static trial (markers without a task keep their weight). Bodies the model
+    /// lacks are skipped with a warning (in `warnings`), as OpenSim's ScaleTool does.
     pub fn with_scale_setup(
         &self,
         setup: &crate::io::osim::ScaleSetup,
