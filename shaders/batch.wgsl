@@ -1,6 +1,9 @@
 // Batched forward kinematics, marker Jacobian and Gauss–Newton assembly: one invocation per frame.
-// The mirror of src/kinematics/{cpu,assembly}.rs and src/model/proxy.rs in f32; see
-// docs/KINEMATICS.md for the math and src/kinematics/wgpu/layout.rs for the buffer layouts.
+// The mirror of src/kinematics/{cpu,assembly}.rs and src/model/proxy.rs in the scalar type `real`:
+// f32, or f64 where the adapter offers SHADER_F64 and it is asked for. The host prepends
+// shaders/real_f32.wgsl or shaders/real_f64.wgsl, which define `real` and its `sn`/`cs` (WGSL has
+// no f64 sin/cos). See docs/KINEMATICS.md for the math and src/kinematics/gpu/pack.rs for the
+// buffer layouts.
 //
 // The host prepends a header of `const` declarations (sizes and section offsets of one model, and
 // the chunk capacity `CAP` the buffers hold). Per-frame arrays are structure-of-arrays: entry `row`
@@ -22,10 +25,10 @@ struct Params {
 }
 
 @group(0) @binding(0) var<storage, read> mu: array<u32>;
-@group(0) @binding(1) var<storage, read> mf: array<f32>;
-@group(0) @binding(2) var<storage, read> inp: array<f32>;
-@group(0) @binding(3) var<storage, read_write> scr: array<f32>;
-@group(0) @binding(4) var<storage, read_write> outb: array<f32>;
+@group(0) @binding(1) var<storage, read> mf: array<real>;
+@group(0) @binding(2) var<storage, read> inp: array<real>;
+@group(0) @binding(3) var<storage, read_write> scr: array<real>;
+@group(0) @binding(4) var<storage, read_write> outb: array<real>;
 @group(0) @binding(5) var<uniform> params: Params;
 
 const NONE: u32 = 0xffffffffu;
@@ -34,35 +37,35 @@ fn at(row: u32, f: u32) -> u32 {
     return row * params.stride + f;
 }
 
-fn mf3(i: u32) -> vec3<f32> {
-    return vec3<f32>(mf[i], mf[i + 1u], mf[i + 2u]);
+fn mf3(i: u32) -> vec3<real> {
+    return vec3<real>(mf[i], mf[i + 1u], mf[i + 2u]);
 }
 
-fn mf33(i: u32) -> mat3x3<f32> {
-    return mat3x3<f32>(mf3(i), mf3(i + 3u), mf3(i + 6u));
+fn mf33(i: u32) -> mat3x3<real> {
+    return mat3x3<real>(mf3(i), mf3(i + 3u), mf3(i + 6u));
 }
 
-fn s3(row: u32, f: u32) -> vec3<f32> {
-    return vec3<f32>(scr[at(row, f)], scr[at(row + 1u, f)], scr[at(row + 2u, f)]);
+fn s3(row: u32, f: u32) -> vec3<real> {
+    return vec3<real>(scr[at(row, f)], scr[at(row + 1u, f)], scr[at(row + 2u, f)]);
 }
 
-fn put3(row: u32, f: u32, v: vec3<f32>) {
+fn put3(row: u32, f: u32, v: vec3<real>) {
     scr[at(row, f)] = v.x;
     scr[at(row + 1u, f)] = v.y;
     scr[at(row + 2u, f)] = v.z;
 }
 
-fn rot(b: u32, f: u32) -> mat3x3<f32> {
+fn rot(b: u32, f: u32) -> mat3x3<real> {
     let r = S_ROT + 9u * b;
-    return mat3x3<f32>(s3(r, f), s3(r + 3u, f), s3(r + 6u, f));
+    return mat3x3<real>(s3(r, f), s3(r + 3u, f), s3(r + 6u, f));
 }
 
-fn scale(b: u32, f: u32) -> vec3<f32> {
+fn scale(b: u32, f: u32) -> vec3<real> {
     return s3(S_Y + NQ + 3u * b, f);
 }
 
 // Index of the segment [x[i], x[i+1]] of n sorted knots at `xs` used for `x` (clamped to the ends).
-fn segment(xs: u32, n: u32, x: f32) -> u32 {
+fn segment(xs: u32, n: u32, x: real) -> u32 {
     var p = 0u;
     while (p < n && mf[xs + p] <= x) {
         p += 1u;
@@ -78,14 +81,14 @@ fn segment(xs: u32, n: u32, x: f32) -> u32 {
 
 // Value and derivative of function `fi` at `x` (src/model/function.rs; multipliers are folded
 // into the scale stored first among the parameters).
-fn feval(fi: u32, x: f32) -> vec2<f32> {
+fn feval(fi: u32, x: real) -> vec2<real> {
     let kind = mu[U_FUNC + 3u * fi];
     let s = mu[U_FUNC + 3u * fi + 1u];
     let n = mu[U_FUNC + 3u * fi + 2u];
     let k = mf[s];
     let p = s + 1u;
-    var v = 0.0;
-    var d = 0.0;
+    var v: real = 0.0;
+    var d: real = 0.0;
     switch kind {
         case 0u: {
             v = mf[p];
@@ -133,21 +136,21 @@ fn feval(fi: u32, x: f32) -> vec2<f32> {
         }
         default: {}
     }
-    return vec2<f32>(k * v, k * d);
+    return vec2<real>(k * v, k * d);
 }
 
 // Rotation by `angle` about unit `axis`.
-fn axis_angle(axis: vec3<f32>, angle: f32) -> mat3x3<f32> {
-    let c = cos(angle);
-    let s = sin(angle);
+fn axis_angle(axis: vec3<real>, angle: real) -> mat3x3<real> {
+    let c = cs(angle);
+    let s = sn(angle);
     let t = 1.0 - c;
     let x = axis.x;
     let y = axis.y;
     let z = axis.z;
-    return mat3x3<f32>(
-        vec3<f32>(t * x * x + c, t * x * y + s * z, t * x * z - s * y),
-        vec3<f32>(t * x * y - s * z, t * y * y + c, t * y * z + s * x),
-        vec3<f32>(t * x * z + s * y, t * y * z - s * x, t * z * z + c),
+    return mat3x3<real>(
+        vec3<real>(t * x * x + c, t * x * y + s * z, t * x * z - s * y),
+        vec3<real>(t * x * y - s * z, t * y * y + c, t * y * z + s * x),
+        vec3<real>(t * x * z + s * y, t * y * z - s * x, t * z * z + c),
     );
 }
 
@@ -165,13 +168,13 @@ fn forward(f: u32) {
         scr[at(S_Y + yj, f)] += vd.x;
         scr[at(S_DPHI + t, f)] = vd.y;
     }
-    let c = vec3<f32>(inp[at(I_C, f)], inp[at(I_C + 1u, f)], inp[at(I_C + 2u, f)]);
+    let c = vec3<real>(inp[at(I_C, f)], inp[at(I_C + 1u, f)], inp[at(I_C + 2u, f)]);
     // Bodies in topological order.
     for (var b = 0u; b < NB; b += 1u) {
         let parent = mu[U_BODY + 3u * b];
-        var rp = mat3x3<f32>(vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(0.0, 1.0, 0.0), vec3<f32>(0.0, 0.0, 1.0));
+        var rp = mat3x3<real>(vec3<real>(1.0, 0.0, 0.0), vec3<real>(0.0, 1.0, 0.0), vec3<real>(0.0, 0.0, 1.0));
         var tp = -c;
-        var sp = vec3<f32>(1.0, 1.0, 1.0);
+        var sp = vec3<real>(1.0, 1.0, 1.0);
         if (parent != NONE) {
             rp = rot(parent, f);
             tp = s3(S_POS + 3u * parent, f);
@@ -183,7 +186,7 @@ fn forward(f: u32) {
         for (var m = mu[U_BODY + 3u * b + 1u]; m < mu[U_BODY + 3u * b + 2u]; m += 1u) {
             let kind = mu[U_MOT + 4u * m];
             let coord = mu[U_MOT + 4u * m + 1u];
-            var x = 0.0;
+            var x: real = 0.0;
             if (coord != NONE) {
                 x = scr[at(S_Y + coord, f)];
             }
@@ -197,7 +200,7 @@ fn forward(f: u32) {
             if (kind == 0u) {
                 r = r * axis_angle(axis, vd.x);
             } else {
-                var sigma = 1.0;
+                var sigma: real = 1.0;
                 if (mu[U_MOT + 4u * m + 3u] != 0u) {
                     sigma = dot(mf3(F_MOT + 6u * m + 3u), sp);
                 }
@@ -214,9 +217,9 @@ fn forward(f: u32) {
         put3(rr + 6u, f, rb[2]);
     }
     // Markers and the objective.
-    var e = 0.0;
-    var sq = 0.0;
-    var used = 0.0;
+    var e: real = 0.0;
+    var sq: real = 0.0;
+    var used: real = 0.0;
     for (var m = 0u; m < NM; m += 1u) {
         let b = mu[U_MARK + m];
         let x = s3(S_POS + 3u * b, f) + rot(b, f) * (scale(b, f) * mf3(F_MARK + 3u * m));
@@ -225,7 +228,7 @@ fn forward(f: u32) {
         outb[at(O_X + 3u * m + 2u, f)] = x.z;
         let w = inp[at(I_MW + m, f)];
         if (w > 0.0) {
-            let o = vec3<f32>(inp[at(I_OBS + 3u * m, f)], inp[at(I_OBS + 3u * m + 1u, f)], inp[at(I_OBS + 3u * m + 2u, f)]);
+            let o = vec3<real>(inp[at(I_OBS + 3u * m, f)], inp[at(I_OBS + 3u * m + 1u, f)], inp[at(I_OBS + 3u * m + 2u, f)]);
             let d = x - o;
             let d2 = dot(d, d);
             e += 0.5 * w * d2;
@@ -287,8 +290,8 @@ fn assemble(f: u32) {
                     let d = scr[at(S_DPHI + mu[U_ITEM + 5u * it + 3u], f)];
                     let slot = mu[U_ITEM + 5u * it + 4u];
                     let coef = mf[F_ITEM + it];
-                    var a = vec3<f32>(0.0, 0.0, 0.0);
-                    var wv = vec3<f32>(0.0, 0.0, 0.0);
+                    var a = vec3<real>(0.0, 0.0, 0.0);
+                    var wv = vec3<real>(0.0, 0.0, 0.0);
                     switch kind {
                         case 0u: {
                             a = rot(idx, f)[kk] * coef;
@@ -322,8 +325,8 @@ fn assemble(f: u32) {
                 let slot = mu[U_OITEM + 3u * oi + 2u];
                 put3(S_ROW + 3u * slot, f, s3(S_ROW + 3u * slot, f) + rb[kk] * (off[kk] * d));
             }
-            let x = vec3<f32>(outb[at(O_X + 3u * m, f)], outb[at(O_X + 3u * m + 1u, f)], outb[at(O_X + 3u * m + 2u, f)]);
-            let o = vec3<f32>(inp[at(I_OBS + 3u * m, f)], inp[at(I_OBS + 3u * m + 1u, f)], inp[at(I_OBS + 3u * m + 2u, f)]);
+            let x = vec3<real>(outb[at(O_X + 3u * m, f)], outb[at(O_X + 3u * m + 1u, f)], outb[at(O_X + 3u * m + 2u, f)]);
+            let o = vec3<real>(inp[at(I_OBS + 3u * m, f)], inp[at(I_OBS + 3u * m + 1u, f)], inp[at(I_OBS + 3u * m + 2u, f)]);
             let r = x - o;
             for (var i = 0u; i < ns; i += 1u) {
                 let ki = mu[slots + i];

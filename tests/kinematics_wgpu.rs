@@ -8,21 +8,26 @@ use common::{random_model, rng};
 use rand::RngExt;
 use smocap::kinematics::assembly::{Evaluator, FrameProblem};
 use smocap::kinematics::backend::{BackendError, BatchBackend, CpuBackend, EnergyEval, FrameModel};
-use smocap::kinematics::gpu::{pack::pack, WgpuBackend, SHADER};
+use smocap::kinematics::gpu::{pack::pack, shader_source, Precision, WgpuBackend, REAL_F32, REAL_F64, SHADER};
 use smocap::model::profile::Profile;
 use smocap::model::proxy::{ProxyKind, ProxyMap};
 use smocap::pipeline::Context;
 use std::process::Command;
 
-/// The wgpu backend, or `None` with a printed note when wgpu finds no adapter at all.
+/// The wgpu backend (f32), or `None` with a printed note when wgpu finds no adapter at all.
 fn gpu(eval: &Evaluator<'_>, cap: usize) -> Option<WgpuBackend> {
-    match WgpuBackend::new(eval, cap) {
+    gpu_in(eval, cap, Precision::F32)
+}
+
+/// The wgpu backend in `precision`, or `None` with a printed note when no adapter offers it.
+fn gpu_in(eval: &Evaluator<'_>, cap: usize, precision: Precision) -> Option<WgpuBackend> {
+    match WgpuBackend::with_precision(eval, cap, precision) {
         Ok(b) => {
             eprintln!("wgpu adapter: {}", b.adapter());
             Some(b)
         }
         Err(BackendError::NoAdapter(why)) => {
-            eprintln!("note: no wgpu adapter, parity not checked: {why}");
+            eprintln!("note: no wgpu adapter for {precision:?}, parity not checked: {why}");
             None
         }
         Err(e) => panic!("wgpu backend: {e}"),
@@ -38,21 +43,26 @@ fn every_shader_validates_with_naga_for_random_and_shipped_models() {
         let p = ProxyMap::new(&m, &Profile::default_for(&m)).unwrap();
         models.push((m, p));
     }
-    // Every shader in shaders/ is the one the backend compiles.
+    // Every shader in shaders/ is one the backend compiles.
     let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/shaders");
     for entry in std::fs::read_dir(dir).unwrap() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "wgsl") {
-            assert_eq!(std::fs::read_to_string(&path).unwrap(), SHADER, "{} is not wired in", path.display());
+            let text = std::fs::read_to_string(&path).unwrap();
+            assert!([SHADER, REAL_F32, REAL_F64].contains(&text.as_str()), "{} is not wired in", path.display());
         }
     }
     for (model, proxy) in &models {
         let eval = Evaluator::new(model, proxy);
-        for cap in [64, 16_384] {
-            let src = format!("{}\n{}", pack(model, proxy, &eval.layout).header(cap), SHADER);
+        for (cap, precision) in [(64, Precision::F32), (16_384, Precision::F32), (64, Precision::F64)] {
+            let src = shader_source(&pack(model, proxy, &eval.layout), cap, precision);
             let module = naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
             let flags = naga::valid::ValidationFlags::all();
-            naga::valid::Validator::new(flags, naga::valid::Capabilities::default())
+            let caps = match precision {
+                Precision::F32 => naga::valid::Capabilities::default(),
+                Precision::F64 => naga::valid::Capabilities::FLOAT64,
+            };
+            naga::valid::Validator::new(flags, caps)
                 .validate(&module)
                 .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
             for entry in ["linearize", "energy"] {
@@ -240,6 +250,42 @@ fn wgpu_matches_cpu_on_the_shipped_model_near_and_far_from_the_solution() {
     ] {
         let batch = random_batch(&eval, 300, 7, spread, offset);
         assert_parity_g(what, &parity(&eval, &mut gpu, &batch), g_tol);
+    }
+}
+
+/// In f64 the shaders agree with the CPU reference to 1e-12: positions (m), H, g (relative to
+/// their largest entry) and E, near and far from the solution and far from the lab origin.
+#[test]
+fn wgpu_f64_matches_cpu_to_1e_12_where_the_adapter_offers_shader_f64() {
+    let ctx = Context::shipped().unwrap();
+    let shipped = ctx.evaluator();
+    let Some(mut gpu) = gpu_in(&shipped, 1024, Precision::F64) else { return };
+    assert_eq!(gpu.precision(), Precision::F64);
+    let check = |what: &str, p: &Parity| {
+        eprintln!(
+            "{what} (f64): positions {:.2e} m, H {:.2e} (worst entry {:.2e}), g {:.2e}, E {:.2e}",
+            p.pos, p.h_rel, p.h_entry, p.g_rel, p.e_rel
+        );
+        for (name, v) in [("positions", p.pos), ("H", p.h_rel), ("g", p.g_rel), ("E", p.e_rel)] {
+            assert!(v <= 1e-12, "{what}: {name} differs by {v}");
+        }
+    };
+    for (what, spread, offset) in [
+        ("shipped, 5 cm", 0.05, [0.0; 3]),
+        ("shipped, 2 mm", 0.002, [0.0; 3]),
+        ("shipped, 2 mm at 4 m", 0.002, [4.0, 3.0, 0.0]),
+    ] {
+        check(what, &parity(&shipped, &mut gpu, &random_batch(&shipped, 300, 7, spread, offset)));
+    }
+    for seed in [31, 32] {
+        let model = random_model(seed, 8);
+        let proxy = ProxyMap::new(&model, &Profile::default_for(&model)).unwrap();
+        let eval = Evaluator::new(&model, &proxy);
+        let Some(mut gpu) = gpu_in(&eval, 64, Precision::F64) else { return };
+        check(
+            &format!("random model {seed}"),
+            &parity(&eval, &mut gpu, &random_batch(&eval, 150, seed, 0.05, [0.0; 3])),
+        );
     }
 }
 

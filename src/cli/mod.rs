@@ -95,7 +95,8 @@ pub(crate) fn load_context_with_markers(
 /// Evaluation backend options shared by `solve` and `demo`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct BackendArgs {
-    /// Evaluation backend: `auto` uses wgpu only on a real (discrete or integrated) GPU.
+    /// Evaluation backend: `auto` uses wgpu only on a real (discrete or integrated) GPU;
+    /// `wgpu-f64` runs the shaders in f64 (adapters offering SHADER_F64).
     #[arg(long, value_enum, default_value_t = crate::pipeline::device::BackendChoice::Auto)]
     pub backend: crate::pipeline::device::BackendChoice,
     /// Lanes of the scheduler (segments in flight); default: the thread count on the CPU

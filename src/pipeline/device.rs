@@ -1,4 +1,4 @@
-//! Choosing the evaluation backend (`--backend cpu|wgpu|auto`).
+//! Choosing the evaluation backend (`--backend cpu|wgpu|wgpu-f64|auto`).
 //!
 //! `auto` takes wgpu only on a real GPU (discrete or integrated): a CPU adapter such as
 //! lavapipe runs the shaders slower than the CPU backend, so `auto` falls back to the CPU and
@@ -16,6 +16,9 @@ pub enum BackendChoice {
     Cpu,
     /// wgpu compute shaders (f32) on the best adapter found, CPU adapters included.
     Wgpu,
+    /// wgpu compute shaders in f64, on the best adapter offering `SHADER_F64` (agrees with the
+    /// CPU reference to ~1e-12; slow on consumer GPUs, whose f64 rate is 1/32–1/64 of f32).
+    WgpuF64,
     /// wgpu on a real GPU, else the CPU backend.
     #[default]
     Auto,
@@ -70,6 +73,9 @@ pub fn choose(choice: BackendChoice, eval: &Evaluator<'_>, cap: usize) -> Result
     match choice {
         BackendChoice::Cpu => Ok(Chosen::Cpu { note: None }),
         BackendChoice::Wgpu => Ok(Chosen::Wgpu(Box::new(WgpuBackend::new(eval, cap)?))),
+        BackendChoice::WgpuF64 => {
+            Ok(Chosen::Wgpu(Box::new(WgpuBackend::with_precision(eval, cap, gpu::Precision::F64)?)))
+        }
         BackendChoice::Auto => {
             let adapters = gpu::list_adapters();
             let Some(best) = adapters.first() else {

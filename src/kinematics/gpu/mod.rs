@@ -1,4 +1,5 @@
-//! The wgpu compute backend: `shaders/batch.wgsl` evaluates one frame per invocation, in f32.
+//! The wgpu compute backend: `shaders/batch.wgsl` evaluates one frame per invocation, in f32 or,
+//! where the adapter offers `SHADER_F64` and it is asked for, in f64 ([`Precision`]).
 //!
 //! The model is uploaded once ([`pack`]); each batch is cut into chunks of at most `cap` frames
 //! (what one storage binding holds, from the adapter's limits), each chunk is packed as
@@ -7,14 +8,54 @@
 //! body-scale differences rather than lab coordinates.
 
 pub mod pack;
+mod words;
 
 use super::assembly::{Evaluator, FrameProblem};
 use super::backend::{check_shape, BackendError, BatchBackend, EnergyEval, FrameModel};
 use rayon::prelude::*;
 use std::sync::{Arc, Mutex};
 
-/// The shader source; `pack::Packed::header` is prepended at pipeline creation.
+/// The shader source; [`shader_source`] prepends the scalar prelude and the model's header.
 pub const SHADER: &str = include_str!("../../../shaders/batch.wgsl");
+/// The f32 prelude: `real = f32` and the built-in sin/cos.
+pub const REAL_F32: &str = include_str!("../../../shaders/real_f32.wgsl");
+/// The f64 prelude: `real = f64` and sin/cos computed in f64 (WGSL has none).
+pub const REAL_F64: &str = include_str!("../../../shaders/real_f64.wgsl");
+
+/// The scalar type the shaders compute in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Precision {
+    /// Every GPU; positions agree with the f64 CPU reference to ~1e-6 m.
+    #[default]
+    F32,
+    /// Needs `wgpu::Features::SHADER_F64`; agrees with the CPU reference to ~1e-12. Consumer GPUs
+    /// run f64 at 1/32–1/64 of their f32 rate; data-centre GPUs (H100: 1/2) much faster.
+    F64,
+}
+
+impl Precision {
+    /// The WGSL prelude defining `real`, `sn` and `cs`.
+    pub fn prelude(self) -> &'static str {
+        match self {
+            Precision::F32 => REAL_F32,
+            Precision::F64 => REAL_F64,
+        }
+    }
+
+    /// "f32" or "f64".
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::F64 => "f64",
+        }
+    }
+}
+
+/// The complete WGSL of a model packed as `packed`, for chunks of `cap` frames.
+pub fn shader_source(packed: &pack::Packed, cap: usize, precision: Precision) -> String {
+    format!("{}\n{}\n{}", precision.prelude(), packed.header(cap), SHADER)
+}
 
 /// Frames per chunk when the adapter's limits allow it. One invocation evaluates one frame, so a
 /// large GPU needs many frames per dispatch to be busy (an H100 keeps ~270k invocations resident);
@@ -81,10 +122,21 @@ pub fn list_adapters() -> Vec<AdapterSummary> {
     a.iter().map(|a| AdapterSummary::of(&a.get_info())).collect()
 }
 
-/// The best adapter, or an error naming what was searched.
-fn best_adapter() -> Result<wgpu::Adapter, BackendError> {
+/// The best adapter (for f64: the best offering `SHADER_F64`), or an error naming what was
+/// searched.
+fn best_adapter(precision: Precision) -> Result<wgpu::Adapter, BackendError> {
     let mut a = pollster::block_on(instance().enumerate_adapters(wgpu::Backends::all()));
     a.sort_by_key(|a| rank(a.get_info().device_type));
+    if precision == Precision::F64 && !a.is_empty() {
+        let names: Vec<String> = a.iter().map(|a| a.get_info().name).collect();
+        return a.into_iter().find(|a| a.features().contains(wgpu::Features::SHADER_F64)).ok_or_else(|| {
+            BackendError::NoAdapter(format!(
+                "no wgpu adapter offers SHADER_F64 (f64 in shaders); found: {}; use the f32 shaders \
+                 (--backend wgpu) or the CPU backend",
+                names.join(", ")
+            ))
+        });
+    }
     a.into_iter().next().ok_or_else(|| {
         BackendError::NoAdapter(format!(
             "wgpu found no adapter on backends {} (for Vulkan on Linux: a GPU driver, or lavapipe from \
@@ -98,7 +150,7 @@ fn best_adapter() -> Result<wgpu::Adapter, BackendError> {
 /// Device errors raised outside an error scope, kept until the next check.
 type ErrorSlot = Arc<Mutex<Option<String>>>;
 
-/// Batched evaluation on a wgpu adapter (f32).
+/// Batched evaluation on a wgpu adapter (f32 or f64).
 pub struct WgpuBackend {
     device: wgpu::Device,
     queue: wgpu::Queue,
@@ -115,8 +167,9 @@ pub struct WgpuBackend {
     cap: usize,
     np: usize,
     nm: usize,
-    host_in: Vec<f32>,
-    host_out: Vec<f32>,
+    precision: Precision,
+    host_in: words::Words,
+    host_out: words::Words,
     /// Reference point of each frame of the two chunks in flight (f32-representable, in f64).
     refs: [Vec<[f64; 3]>; 2],
     errors: ErrorSlot,
@@ -129,10 +182,25 @@ impl std::fmt::Debug for WgpuBackend {
 }
 
 impl WgpuBackend {
-    /// Uploads `eval`'s model to the best adapter found; `require_real_gpu` refuses CPU adapters.
+    /// Uploads `eval`'s model to the best adapter found, f32 shaders.
     pub fn new(eval: &Evaluator<'_>, max_cap: usize) -> Result<WgpuBackend, BackendError> {
-        let adapter = best_adapter()?;
-        WgpuBackend::on_adapter(eval, adapter, max_cap)
+        WgpuBackend::with_precision(eval, max_cap, Precision::F32)
+    }
+
+    /// As [`WgpuBackend::new`], in the given precision (f64 needs an adapter offering
+    /// `SHADER_F64`: an error names the adapters found otherwise).
+    pub fn with_precision(
+        eval: &Evaluator<'_>,
+        max_cap: usize,
+        precision: Precision,
+    ) -> Result<WgpuBackend, BackendError> {
+        let adapter = best_adapter(precision)?;
+        WgpuBackend::on_adapter(eval, adapter, max_cap, precision)
+    }
+
+    /// The scalar type the shaders compute in.
+    pub fn precision(&self) -> Precision {
+        self.precision
     }
 
     /// The adapter this backend runs on.
@@ -145,13 +213,21 @@ impl WgpuBackend {
         self.cap
     }
 
-    fn on_adapter(eval: &Evaluator<'_>, adapter: wgpu::Adapter, max_cap: usize) -> Result<WgpuBackend, BackendError> {
+    fn on_adapter(
+        eval: &Evaluator<'_>,
+        adapter: wgpu::Adapter,
+        max_cap: usize,
+        precision: Precision,
+    ) -> Result<WgpuBackend, BackendError> {
         let summary = AdapterSummary::of(&adapter.get_info());
         let fail = |message: String| BackendError::Device { adapter: summary.name.clone(), message };
         let limits = adapter.limits();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("smocap"),
-            required_features: wgpu::Features::empty(),
+            required_features: match precision {
+                Precision::F32 => wgpu::Features::empty(),
+                Precision::F64 => wgpu::Features::SHADER_F64,
+            },
             required_limits: limits.clone(),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
@@ -168,7 +244,11 @@ impl WgpuBackend {
         let packed = pack::pack(eval.model, eval.proxy, &eval.layout);
         let rows = packed.rows;
         // Chunk capacity: every per-frame buffer must fit one binding.
-        let widest = 4 * rows.input.max(rows.scratch).max(rows.output) as u64;
+        let word = match precision {
+            Precision::F32 => 4,
+            Precision::F64 => 8,
+        };
+        let widest = word * rows.input.max(rows.scratch).max(rows.output) as u64;
         let bind = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         let by_limits = (bind / widest) as usize;
         let by_groups = limits.max_compute_workgroups_per_dimension as usize * 64;
@@ -178,7 +258,7 @@ impl WgpuBackend {
                 "one frame needs {widest} bytes per binding, more than the adapter's limit of {bind} bytes"
             )));
         }
-        let source = format!("{}\n{}", packed.header(cap), SHADER);
+        let source = shader_source(&packed, cap, precision);
 
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -242,11 +322,11 @@ impl WgpuBackend {
             })
         };
         let mu = init("model u32", bytemuck::cast_slice(&packed.mu));
-        let mf = init("model f32", bytemuck::cast_slice(&packed.mf));
+        let mf = init("model reals", words::Words::from_f64(precision, &packed.mf).bytes(packed.mf.len()));
         let buffer = |label: &str, words: usize, usage: wgpu::BufferUsages| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
-                size: 4 * words as u64,
+                size: word * words as u64,
                 usage,
                 mapped_at_creation: false,
             })
@@ -256,7 +336,13 @@ impl WgpuBackend {
         let scratch = buffer("scratch", cap * rows.scratch, U::STORAGE);
         let output = buffer("output", cap * rows.output, U::STORAGE | U::COPY_SRC);
         let staging = [0, 1].map(|_| buffer("staging", cap * rows.output, U::MAP_READ | U::COPY_DST));
-        let params = buffer("params", 4, U::UNIFORM | U::COPY_DST);
+        // Four u32: whatever the precision, 16 bytes.
+        let params = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("params"),
+            size: 16,
+            usage: U::UNIFORM | U::COPY_DST,
+            mapped_at_creation: false,
+        });
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("batch"),
             layout: &layout,
@@ -287,8 +373,9 @@ impl WgpuBackend {
             cap,
             np: eval.proxy.np(),
             nm: eval.model.markers.len(),
-            host_in: Vec::new(),
-            host_out: Vec::new(),
+            precision,
+            host_in: words::Words::new(precision),
+            host_out: words::Words::new(precision),
             refs: [vec![[0.0; 3]; cap], vec![[0.0; 3]; cap]],
             errors,
         })
@@ -301,9 +388,7 @@ impl WgpuBackend {
     /// Packs frames into `host_in` (structure of arrays, stride [`stride`]).
     fn pack_chunk(&mut self, frames: &[FrameProblem<'_>], proxies: &[f64], slot: usize) {
         let (cap, r, np) = (stride(frames.len()), self.rows, self.np);
-        if self.host_in.len() < cap * r.input {
-            self.host_in.resize(cap * r.input, 0.0);
-        }
+        self.host_in.ensure(cap * r.input);
         let hi = &mut self.host_in;
         for (i, fr) in frames.iter().enumerate() {
             let used = |m: usize| {
@@ -322,21 +407,21 @@ impl WgpuBackend {
             }
             self.refs[slot][i] = c;
             for k in 0..np {
-                hi[(r.i_p + k) * cap + i] = proxies[i * np + k] as f32;
+                hi.set((r.i_p + k) * cap + i, proxies[i * np + k]);
             }
             for m in 0..self.nm {
                 let u = used(m);
-                hi[(r.i_mw + m) * cap + i] = if u { fr.marker_weights[m] as f32 } else { 0.0 };
+                hi.set((r.i_mw + m) * cap + i, if u { fr.marker_weights[m] } else { 0.0 });
                 for (a, &ca) in c.iter().enumerate() {
-                    hi[(r.i_obs + 3 * m + a) * cap + i] = if u { (fr.observed[3 * m + a] - ca) as f32 } else { 0.0 };
+                    hi.set((r.i_obs + 3 * m + a) * cap + i, if u { fr.observed[3 * m + a] - ca } else { 0.0 });
                 }
             }
             for (j, (&y, &w)) in fr.tracking_ref.iter().zip(fr.tracking_weights).enumerate() {
-                hi[(r.i_tref + j) * cap + i] = y as f32;
-                hi[(r.i_tw + j) * cap + i] = w as f32;
+                hi.set((r.i_tref + j) * cap + i, y);
+                hi.set((r.i_tw + j) * cap + i, w);
             }
             for (a, &ca) in c.iter().enumerate() {
-                hi[(r.i_c + a) * cap + i] = ca as f32;
+                hi.set((r.i_c + a) * cap + i, ca);
             }
         }
     }
@@ -347,7 +432,7 @@ impl WgpuBackend {
         let rows = if linearize { self.rows.output } else { 3 };
         let st = stride(n);
         // Queue writes are ordered after earlier submissions, so the chunk in flight keeps its data.
-        self.queue.write_buffer(&self.input, 0, bytemuck::cast_slice(&self.host_in[..st * self.rows.input]));
+        self.queue.write_buffer(&self.input, 0, self.host_in.bytes(st * self.rows.input));
         self.queue.write_buffer(&self.params, 0, bytemuck::cast_slice(&[n as u32, st as u32, 0, 0]));
         let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("chunk") });
         {
@@ -356,7 +441,7 @@ impl WgpuBackend {
             pass.set_bind_group(0, &self.bind_group, &[]);
             pass.dispatch_workgroups(n.div_ceil(64) as u32, 1, 1);
         }
-        let bytes = (4 * rows * st) as u64;
+        let bytes = (self.host_in.word() * rows * st) as u64;
         enc.copy_buffer_to_buffer(&self.output, 0, &self.staging[slot], 0, bytes);
         let index = self.queue.submit([enc.finish()]);
         let (tx, rx) = std::sync::mpsc::channel();
@@ -378,12 +463,9 @@ impl WgpuBackend {
         }
         let words = p.rows * p.stride;
         {
-            let slice = self.staging[p.slot].slice(..(4 * words) as u64);
+            let slice = self.staging[p.slot].slice(..(self.host_out.word() * words) as u64);
             let view = slice.get_mapped_range().map_err(|e| self.fail(format!("reading the results: {e:?}")))?;
-            if self.host_out.len() < words {
-                self.host_out.resize(words, 0.0);
-            }
-            self.host_out[..words].copy_from_slice(bytemuck::cast_slice(&view));
+            self.host_out.copy_from_bytes(&view);
         }
         self.staging[p.slot].unmap();
         if let Some(e) = self.errors.lock().unwrap_or_else(|p| p.into_inner()).take() {
@@ -444,7 +526,7 @@ impl BatchBackend for WgpuBackend {
     }
 
     fn device(&self) -> String {
-        format!("wgpu: {}, f32", self.adapter)
+        format!("wgpu: {}, {}", self.adapter, self.precision.name())
     }
 
     fn linearize(
@@ -459,16 +541,16 @@ impl BatchBackend for WgpuBackend {
             let (r, ho, refs) = (me.rows, &me.host_out, &me.refs[slot]);
             out[range].par_iter_mut().enumerate().for_each(|(i, o)| {
                 let gn = &mut o.gn;
-                gn.energy = ho[i] as f64;
-                gn.marker_sq_sum = ho[cap + i] as f64;
-                gn.markers_used = ho[2 * cap + i] as usize;
+                gn.energy = ho.get(i);
+                gn.marker_sq_sum = ho.get(cap + i);
+                gn.markers_used = ho.get(2 * cap + i) as usize;
                 for k in 0..np {
-                    gn.g[k] = ho[(r.o_g + k) * cap + i] as f64;
+                    gn.g[k] = ho.get((r.o_g + k) * cap + i);
                 }
                 let mut e = r.o_h;
                 for k in 0..np {
                     for l in k..np {
-                        let v = ho[e * cap + i] as f64;
+                        let v = ho.get(e * cap + i);
                         gn.h[(k, l)] = v;
                         gn.h[(l, k)] = v;
                         e += 1;
@@ -476,7 +558,7 @@ impl BatchBackend for WgpuBackend {
                 }
                 let c = refs[i];
                 for (j, x) in o.markers.iter_mut().enumerate() {
-                    *x = ho[(r.o_x + j) * cap + i] as f64 + c[j % 3];
+                    *x = ho.get((r.o_x + j) * cap + i) + c[j % 3];
                 }
             });
         })
@@ -493,9 +575,9 @@ impl BatchBackend for WgpuBackend {
             let ho = &me.host_out;
             for (i, o) in out[range].iter_mut().enumerate() {
                 *o = EnergyEval {
-                    energy: ho[i] as f64,
-                    marker_sq_sum: ho[cap + i] as f64,
-                    markers_used: ho[2 * cap + i] as usize,
+                    energy: ho.get(i),
+                    marker_sq_sum: ho.get(cap + i),
+                    markers_used: ho.get(2 * cap + i) as usize,
                 };
             }
         })

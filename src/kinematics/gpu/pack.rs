@@ -1,4 +1,5 @@
-//! The model as the shaders read it: two flat arrays (`u32` indices, `f32` values) with section
+//! The model as the shaders read it: two flat arrays (`u32` indices, real values: kept in f64 here,
+//! uploaded as the shader's `real`, f32 or f64) with section
 //! offsets, and the WGSL header of `const`s that names those offsets and the per-frame row
 //! layouts of the input, scratch and output buffers (see `shaders/batch.wgsl`).
 //!
@@ -47,7 +48,8 @@ pub struct Rows {
 #[derive(Clone, Debug)]
 pub struct Packed {
     pub mu: Vec<u32>,
-    pub mf: Vec<f32>,
+    /// Real values in f64; [`super::Precision`] converts them at upload.
+    pub mf: Vec<f64>,
     pub rows: Rows,
     /// `const` declarations except `CAP`, which [`Packed::header`] adds.
     consts: String,
@@ -61,34 +63,34 @@ impl Packed {
 }
 
 /// Appends `f` (times `scale`) to the function table; returns its index.
-fn push_function(fu: &mut Vec<u32>, fp: &mut Vec<f32>, f: &Function, scale: f64) -> u32 {
+fn push_function(fu: &mut Vec<u32>, fp: &mut Vec<f64>, f: &Function, scale: f64) -> u32 {
     if let Function::Multiplier { scale: s, inner } = f {
         return push_function(fu, fp, inner, scale * s);
     }
     let start = fp.len() as u32;
-    fp.push(scale as f32);
+    fp.push(scale);
     let (kind, n) = match f {
         Function::Constant { value } => {
-            fp.push(*value as f32);
+            fp.push(*value);
             (0, 1)
         }
         Function::Linear { slope, intercept } => {
-            fp.extend([*slope as f32, *intercept as f32]);
+            fp.extend([*slope, *intercept]);
             (1, 2)
         }
         Function::Polynomial { coefficients } => {
-            fp.extend(coefficients.iter().map(|&c| c as f32));
+            fp.extend(coefficients.iter().copied());
             (2, coefficients.len())
         }
         Function::Spline(s) => {
             for v in [&s.x, &s.a, &s.b, &s.c, &s.d] {
-                fp.extend(v.iter().map(|&c| c as f32));
+                fp.extend(v.iter().copied());
             }
             (3, s.x.len())
         }
         Function::PiecewiseLinear { x, y } => {
-            fp.extend(x.iter().map(|&c| c as f32));
-            fp.extend(y.iter().map(|&c| c as f32));
+            fp.extend(x.iter().copied());
+            fp.extend(y.iter().copied());
             (4, x.len())
         }
         Function::Multiplier { .. } => unreachable!("unwrapped above"),
@@ -103,13 +105,13 @@ pub fn pack(model: &Model, proxy: &ProxyMap, layout: &Layout) -> Packed {
     let (nb, nmot, nm, np, ny, nq, nt) =
         (model.nb(), model.motions.len(), model.markers.len(), proxy.np(), model.ny(), model.nq(), proxy.terms.len());
     let nh = np * (np + 1) / 2;
-    // Function table first: its parameters go into their own f32 section.
+    // Function table first: its parameters go into their own real section.
     let (mut fu, mut fp) = (Vec::new(), Vec::new());
     let motion_func: Vec<u32> = model.motions.iter().map(|m| push_function(&mut fu, &mut fp, &m.func, 1.0)).collect();
     let term_func: Vec<u32> = proxy.terms.iter().map(|t| push_function(&mut fu, &mut fp, &t.func, 1.0)).collect();
 
     let mut mu: Vec<u32> = Vec::new();
-    let mut mf: Vec<f32> = Vec::new();
+    let mut mf: Vec<f64> = Vec::new();
     let mut consts = String::new();
     let mut c = |name: &str, v: usize| {
         let _ = writeln!(consts, "const {name}: u32 = {v}u;");
@@ -120,7 +122,7 @@ pub fn pack(model: &Model, proxy: &ProxyMap, layout: &Layout) -> Packed {
     c("NLB", layout.bodies.len());
     c("NH", nh);
 
-    // f32 sections.
+    // Real sections.
     c("F_FUNC", mf.len());
     let f_func = mf.len() as u32;
     mf.extend(&fp);
@@ -131,21 +133,21 @@ pub fn pack(model: &Model, proxy: &ProxyMap, layout: &Layout) -> Packed {
     for b in &model.bodies {
         for iso in [&b.joint.parent_offset, &b.joint.child_offset] {
             let r = iso.rotation.to_rotation_matrix();
-            mf.extend(r.matrix().as_slice().iter().map(|&v| v as f32)); // column-major
-            mf.extend(iso.translation.vector.iter().map(|&v| v as f32));
+            mf.extend(r.matrix().as_slice().iter().copied()); // column-major
+            mf.extend(iso.translation.vector.iter().copied());
         }
     }
     c("F_MOT", mf.len());
     for m in &model.motions {
-        mf.extend(m.axis.iter().map(|&v| v as f32));
-        mf.extend(m.parent_scale_weights.unwrap_or_default().iter().map(|&v| v as f32));
+        mf.extend(m.axis.iter().copied());
+        mf.extend(m.parent_scale_weights.unwrap_or_default().iter().copied());
     }
     c("F_MARK", mf.len());
     for m in &model.markers {
-        mf.extend(m.offset.iter().map(|&v| v as f32));
+        mf.extend(m.offset.iter().copied());
     }
     c("F_YOFF", mf.len());
-    mf.extend(proxy.offsets.iter().map(|&v| v as f32));
+    mf.extend(proxy.offsets.iter().copied());
 
     // u32 sections.
     c("U_FUNC", mu.len());
@@ -189,7 +191,7 @@ pub fn pack(model: &Model, proxy: &ProxyMap, layout: &Layout) -> Packed {
         let mut emit = |kind: u32, idx: usize, k: usize, coef: f64, j: usize| {
             for t in proxy.y_terms[j].clone() {
                 items.extend([kind, idx as u32, k as u32, t as u32, slot(t)]);
-                coefs.push(coef as f32);
+                coefs.push(coef);
             }
         };
         for &a in model.chain(body) {
