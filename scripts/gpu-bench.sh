@@ -3,7 +3,8 @@
 # prebuilt release binary (cargo build --release); needs no network.
 #   bash scripts/gpu-bench.sh            # writes results to stdout and to $OUT (or ./gpu-bench-out)
 # Each command is capped at 180 s. Measures: batched linearize/energy throughput of the shipped model at 1k/10k/100k frames per call
-# on cpu and wgpu, and whole-solve frames/s of a 100k-frame synthetic trial on both backends.
+# on cpu and wgpu (f32; f64 at 10k/100k), with wgpu's phase breakdown (pack, upload, device wait,
+# read-back, unpack), and whole-solve frames/s of a 100k-frame synthetic trial on both backends.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 BIN=${BIN:-target/release/smocap}
@@ -20,6 +21,9 @@ mkdir -p "$OUTDIR"
     timeout 180 "$BIN" bench-batch --backend wgpu --cap "$cap" --sizes 1000,10000,100000 --repeats 5 \
       || echo "bench-batch wgpu --cap $cap failed: $?"
   done
+  # f64 shaders (SHADER_F64): parity 1e-12; the H100 runs f64 at half its f32 rate.
+  timeout 180 "$BIN" bench-batch --backend wgpu-f64 --cap 65536 --sizes 10000,100000 --repeats 3 \
+    || echo "bench-batch wgpu-f64 failed: $?"
   for b in cpu wgpu; do
     for lanes in 250 1000; do
       echo "# whole solve: demo --frames 100000 --backend $b --lanes $lanes"

@@ -4,6 +4,7 @@
 
 use crate::kinematics::assembly::FrameProblem;
 use crate::kinematics::backend::{BatchBackend, CpuBackend, EnergyEval, FrameModel};
+use crate::kinematics::gpu::PhaseTimes;
 use crate::pipeline::device::{choose, BackendChoice, Chosen};
 use crate::pipeline::Context;
 use crate::synth::{synthesize, SynthOptions};
@@ -41,10 +42,6 @@ pub fn run(a: BenchArgs) -> anyhow::Result<u8> {
         Chosen::Wgpu(b) => format!("{}, {} frames per dispatch", chosen.device(), b.chunk_capacity()),
         _ => chosen.device(),
     };
-    let backend: &mut dyn BatchBackend = match &mut chosen {
-        Chosen::Cpu { .. } => &mut cpu,
-        Chosen::Wgpu(b) => b.as_mut(),
-    };
     let distinct = a.distinct.max(1);
     let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: distinct, seed: 5, ..SynthOptions::default() });
     let matched = crate::pipeline::trial::match_markers(&ctx, "synthetic", &s.trial)?;
@@ -55,7 +52,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<u8> {
     let tw = vec![1e-6; ny];
     println!(
         "# bench-batch: shipped model ({np} proxies, {nm} markers), backend {} on {device}, median of {} runs",
-        backend.name(),
+        chosen.name(),
         a.repeats
     );
     println!("# backend\tbatch\tlinearize_ms\tlinearize_frames_per_s\tenergy_ms\tenergy_frames_per_s");
@@ -75,29 +72,60 @@ pub fn run(a: BenchArgs) -> anyhow::Result<u8> {
         let proxies: Vec<f64> = (0..n).flat_map(|i| s.truth.proxies[i % distinct].iter().copied()).collect();
         let mut out = vec![FrameModel::new(np, nm); n];
         let mut energies = vec![EnergyEval::default(); n];
-        let mut lin = Vec::new();
-        let mut en = Vec::new();
-        for r in 0..=a.repeats.max(1) {
-            let t = Instant::now();
-            backend.linearize(&frames, &proxies, &mut out)?;
-            let tl = t.elapsed().as_secs_f64();
-            let t = Instant::now();
-            backend.energy(&frames, &proxies, &mut energies)?;
-            let te = t.elapsed().as_secs_f64();
-            if r > 0 {
-                lin.push(tl);
-                en.push(te);
+        let repeats = a.repeats.max(1);
+        // Each kind of call: a warm-up, then `repeats` timed calls (wgpu: with its phase account).
+        let mut timed = |linearize: bool| -> anyhow::Result<(f64, Option<PhaseTimes>)> {
+            let mut times = Vec::new();
+            for r in 0..=repeats {
+                if r == 1 {
+                    if let Chosen::Wgpu(b) = &mut chosen {
+                        b.reset_phase_times();
+                    }
+                }
+                let backend: &mut dyn BatchBackend = match &mut chosen {
+                    Chosen::Cpu { .. } => &mut cpu,
+                    Chosen::Wgpu(b) => b.as_mut(),
+                };
+                let t = Instant::now();
+                if linearize {
+                    backend.linearize(&frames, &proxies, &mut out)?;
+                } else {
+                    backend.energy(&frames, &proxies, &mut energies)?;
+                }
+                if r > 0 {
+                    times.push(t.elapsed().as_secs_f64());
+                }
             }
-        }
-        let (ml, me) = (median(&mut lin), median(&mut en));
+            let phases = match &chosen {
+                Chosen::Wgpu(b) => Some(b.phase_times()),
+                Chosen::Cpu { .. } => None,
+            };
+            Ok((median(&mut times), phases))
+        };
+        let (ml, pl) = timed(true)?;
+        let (me, pe) = timed(false)?;
         println!(
             "{}\t{n}\t{:.3}\t{:.0}\t{:.3}\t{:.0}",
-            backend.name(),
+            chosen.name(),
             ml * 1e3,
             n as f64 / ml,
             me * 1e3,
             n as f64 / me
         );
+        for (what, p) in [("linearize", pl), ("energy", pe)] {
+            if let Some(p) = p {
+                let per = |s: f64| s * 1e3 / repeats as f64;
+                println!(
+                    "#   {what} phases, mean ms per call: pack {:.3}, upload+submit {:.3}, device wait {:.3}, \
+                     read-back copy {:.3}, unpack {:.3}",
+                    per(p.pack_s),
+                    per(p.submit_s),
+                    per(p.wait_s),
+                    per(p.read_s),
+                    per(p.unpack_s)
+                );
+            }
+        }
     }
     Ok(0)
 }

@@ -7,55 +7,20 @@
 //! reference point (the centroid of the observed markers, rounded to f32) so that f32 resolves
 //! body-scale differences rather than lab coordinates.
 
+mod adapter;
 pub mod pack;
+mod shader;
 mod words;
+
+use adapter::best_adapter;
+pub use adapter::{list_adapters, searched_backends, AdapterSummary};
+pub use shader::{shader_source, Precision, REAL_F32, REAL_F64, SHADER};
 
 use super::assembly::{Evaluator, FrameProblem};
 use super::backend::{check_shape, BackendError, BatchBackend, EnergyEval, FrameModel};
 use rayon::prelude::*;
 use std::sync::{Arc, Mutex};
-
-/// The shader source; [`shader_source`] prepends the scalar prelude and the model's header.
-pub const SHADER: &str = include_str!("../../../shaders/batch.wgsl");
-/// The f32 prelude: `real = f32` and the built-in sin/cos.
-pub const REAL_F32: &str = include_str!("../../../shaders/real_f32.wgsl");
-/// The f64 prelude: `real = f64` and sin/cos computed in f64 (WGSL has none).
-pub const REAL_F64: &str = include_str!("../../../shaders/real_f64.wgsl");
-
-/// The scalar type the shaders compute in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Precision {
-    /// Every GPU; positions agree with the f64 CPU reference to ~1e-6 m.
-    #[default]
-    F32,
-    /// Needs `wgpu::Features::SHADER_F64`; agrees with the CPU reference to ~1e-12. Consumer GPUs
-    /// run f64 at 1/32–1/64 of their f32 rate; data-centre GPUs (H100: 1/2) much faster.
-    F64,
-}
-
-impl Precision {
-    /// The WGSL prelude defining `real`, `sn` and `cs`.
-    pub fn prelude(self) -> &'static str {
-        match self {
-            Precision::F32 => REAL_F32,
-            Precision::F64 => REAL_F64,
-        }
-    }
-
-    /// "f32" or "f64".
-    pub fn name(self) -> &'static str {
-        match self {
-            Precision::F32 => "f32",
-            Precision::F64 => "f64",
-        }
-    }
-}
-
-/// The complete WGSL of a model packed as `packed`, for chunks of `cap` frames.
-pub fn shader_source(packed: &pack::Packed, cap: usize, precision: Precision) -> String {
-    format!("{}\n{}\n{}", precision.prelude(), packed.header(cap), SHADER)
-}
+use std::time::Instant;
 
 /// Frames per chunk when the adapter's limits allow it. One invocation evaluates one frame, so a
 /// large GPU needs many frames per dispatch to be busy (an H100 keeps ~270k invocations resident);
@@ -63,88 +28,23 @@ pub fn shader_source(packed: &pack::Packed, cap: usize, precision: Precision) ->
 /// output and two read-back buffers).
 pub const DEFAULT_CAP: usize = 32_768;
 
-/// What an adapter is, for choosing and for run metadata.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct AdapterSummary {
-    pub name: String,
-    /// "DiscreteGpu", "IntegratedGpu", "Cpu", ...
-    pub device_type: String,
-    pub backend: String,
-    pub driver: String,
-    pub driver_info: String,
-    /// A real GPU (discrete or integrated), as `--backend auto` requires.
-    pub real_gpu: bool,
-}
-
-impl AdapterSummary {
-    fn of(info: &wgpu::AdapterInfo) -> AdapterSummary {
-        AdapterSummary {
-            name: info.name.clone(),
-            device_type: format!("{:?}", info.device_type),
-            backend: format!("{:?}", info.backend),
-            driver: info.driver.clone(),
-            driver_info: info.driver_info.clone(),
-            real_gpu: matches!(info.device_type, wgpu::DeviceType::DiscreteGpu | wgpu::DeviceType::IntegratedGpu),
-        }
-    }
-}
-
-impl std::fmt::Display for AdapterSummary {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{} ({}, {}, driver {} {})", self.name, self.device_type, self.backend, self.driver, self.driver_info)
-    }
-}
-
-/// Backends searched for adapters (those compiled in for this platform).
-pub fn searched_backends() -> String {
-    format!("{:?}", wgpu::Instance::enabled_backend_features())
-}
-
-fn instance() -> wgpu::Instance {
-    wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env())
-}
-
-/// Preference order: discrete, integrated, virtual, other, CPU.
-fn rank(t: wgpu::DeviceType) -> u8 {
-    match t {
-        wgpu::DeviceType::DiscreteGpu => 0,
-        wgpu::DeviceType::IntegratedGpu => 1,
-        wgpu::DeviceType::VirtualGpu => 2,
-        wgpu::DeviceType::Other => 3,
-        wgpu::DeviceType::Cpu => 4,
-    }
-}
-
-/// Every adapter wgpu finds, best first (no device is created).
-pub fn list_adapters() -> Vec<AdapterSummary> {
-    let mut a = pollster::block_on(instance().enumerate_adapters(wgpu::Backends::all()));
-    a.sort_by_key(|a| rank(a.get_info().device_type));
-    a.iter().map(|a| AdapterSummary::of(&a.get_info())).collect()
-}
-
-/// The best adapter (for f64: the best offering `SHADER_F64`), or an error naming what was
-/// searched.
-fn best_adapter(precision: Precision) -> Result<wgpu::Adapter, BackendError> {
-    let mut a = pollster::block_on(instance().enumerate_adapters(wgpu::Backends::all()));
-    a.sort_by_key(|a| rank(a.get_info().device_type));
-    if precision == Precision::F64 && !a.is_empty() {
-        let names: Vec<String> = a.iter().map(|a| a.get_info().name).collect();
-        return a.into_iter().find(|a| a.features().contains(wgpu::Features::SHADER_F64)).ok_or_else(|| {
-            BackendError::NoAdapter(format!(
-                "no wgpu adapter offers SHADER_F64 (f64 in shaders); found: {}; use the f32 shaders \
-                 (--backend wgpu) or the CPU backend",
-                names.join(", ")
-            ))
-        });
-    }
-    a.into_iter().next().ok_or_else(|| {
-        BackendError::NoAdapter(format!(
-            "wgpu found no adapter on backends {} (for Vulkan on Linux: a GPU driver, or lavapipe from \
-             mesa-vulkan-drivers, and libvulkan1; VK_ICD_FILENAMES={})",
-            searched_backends(),
-            std::env::var("VK_ICD_FILENAMES").unwrap_or_else(|_| "<unset>".into())
-        ))
-    })
+/// Where the backend's wall time went, summed over the calls since the last
+/// [`WgpuBackend::reset_phase_times`] (seconds). Chunks overlap (the device runs one chunk while
+/// the host packs the next), so `wait_s` is the time the host had nothing else to do.
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub struct PhaseTimes {
+    /// Host: reference points and structure-of-arrays packing of the inputs.
+    pub pack_s: f64,
+    /// Host: queue writes (upload), encoding and submission.
+    pub submit_s: f64,
+    /// Waiting for the device and for the read-back mapping.
+    pub wait_s: f64,
+    /// Host: copying the mapped results out.
+    pub read_s: f64,
+    /// Host: unpacking `(H, g, E, x̂)` into the per-frame results.
+    pub unpack_s: f64,
+    /// Frames evaluated.
+    pub frames: u64,
 }
 
 /// Device errors raised outside an error scope, kept until the next check.
@@ -173,6 +73,7 @@ pub struct WgpuBackend {
     /// Reference point of each frame of the two chunks in flight (f32-representable, in f64).
     refs: [Vec<[f64; 3]>; 2],
     errors: ErrorSlot,
+    phases: PhaseTimes,
 }
 
 impl std::fmt::Debug for WgpuBackend {
@@ -196,6 +97,16 @@ impl WgpuBackend {
     ) -> Result<WgpuBackend, BackendError> {
         let adapter = best_adapter(precision)?;
         WgpuBackend::on_adapter(eval, adapter, max_cap, precision)
+    }
+
+    /// Where the wall time of the calls since the last reset went.
+    pub fn phase_times(&self) -> PhaseTimes {
+        self.phases
+    }
+
+    /// Starts a new [`PhaseTimes`] account.
+    pub fn reset_phase_times(&mut self) {
+        self.phases = PhaseTimes::default();
     }
 
     /// The scalar type the shaders compute in.
@@ -378,6 +289,7 @@ impl WgpuBackend {
             host_out: words::Words::new(precision),
             refs: [vec![[0.0; 3]; cap], vec![[0.0; 3]; cap]],
             errors,
+            phases: PhaseTimes::default(),
         })
     }
 
@@ -385,45 +297,54 @@ impl WgpuBackend {
         BackendError::Device { adapter: self.adapter.name.clone(), message }
     }
 
-    /// Packs frames into `host_in` (structure of arrays, stride [`stride`]).
+    /// Packs frames into `host_in` (structure of arrays, stride [`stride`]): first each frame's
+    /// reference point, then row by row in parallel, so that every row is written contiguously.
     fn pack_chunk(&mut self, frames: &[FrameProblem<'_>], proxies: &[f64], slot: usize) {
-        let (cap, r, np) = (stride(frames.len()), self.rows, self.np);
-        self.host_in.ensure(cap * r.input);
-        let hi = &mut self.host_in;
-        for (i, fr) in frames.iter().enumerate() {
-            let used = |m: usize| {
-                let o = &fr.observed[3 * m..3 * m + 3];
-                fr.marker_weights[m] > 0.0 && !o.iter().any(|v| v.is_nan())
-            };
-            let (mut c, mut n) = ([0.0f64; 3], 0usize);
-            for m in (0..self.nm).filter(|&m| used(m)) {
-                for (a, ca) in c.iter_mut().enumerate() {
-                    *ca += fr.observed[3 * m + a];
+        let (cap, r, np, nm) = (stride(frames.len()), self.rows, self.np, self.nm);
+        let used = |fr: &FrameProblem<'_>, m: usize| {
+            fr.marker_weights[m] > 0.0 && !fr.observed[3 * m..3 * m + 3].iter().any(|v| v.is_nan())
+        };
+        // Reference point: the centroid of the observed markers, rounded to f32 (exact in both
+        // precisions).
+        let refs = &mut self.refs[slot];
+        refs[..frames.len()].par_iter_mut().zip(frames).for_each(|(c, fr)| {
+            let (mut sum, mut n) = ([0.0f64; 3], 0usize);
+            for m in (0..nm).filter(|&m| used(fr, m)) {
+                for (a, s) in sum.iter_mut().enumerate() {
+                    *s += fr.observed[3 * m + a];
                 }
                 n += 1;
             }
-            for ca in &mut c {
-                *ca = if n > 0 { (*ca / n as f64) as f32 as f64 } else { 0.0 };
-            }
-            self.refs[slot][i] = c;
-            for k in 0..np {
-                hi.set((r.i_p + k) * cap + i, proxies[i * np + k]);
-            }
-            for m in 0..self.nm {
-                let u = used(m);
-                hi.set((r.i_mw + m) * cap + i, if u { fr.marker_weights[m] } else { 0.0 });
-                for (a, &ca) in c.iter().enumerate() {
-                    hi.set((r.i_obs + 3 * m + a) * cap + i, if u { fr.observed[3 * m + a] - ca } else { 0.0 });
+            *c = sum.map(|s| if n > 0 { (s / n as f64) as f32 as f64 } else { 0.0 });
+        });
+        let refs = &self.refs[slot];
+        self.host_in.ensure(cap * r.input);
+        self.host_in.fill_rows(r.input, cap, frames.len(), |row, i| {
+            let fr = &frames[i];
+            if row < r.i_obs {
+                proxies[i * np + row - r.i_p]
+            } else if row < r.i_mw {
+                let (m, a) = ((row - r.i_obs) / 3, (row - r.i_obs) % 3);
+                if used(fr, m) {
+                    fr.observed[3 * m + a] - refs[i][a]
+                } else {
+                    0.0
                 }
+            } else if row < r.i_tref {
+                let m = row - r.i_mw;
+                if used(fr, m) {
+                    fr.marker_weights[m]
+                } else {
+                    0.0
+                }
+            } else if row < r.i_tw {
+                fr.tracking_ref.get(row - r.i_tref).copied().unwrap_or(0.0)
+            } else if row < r.i_c {
+                fr.tracking_weights.get(row - r.i_tw).copied().unwrap_or(0.0)
+            } else {
+                refs[i][row - r.i_c]
             }
-            for (j, (&y, &w)) in fr.tracking_ref.iter().zip(fr.tracking_weights).enumerate() {
-                hi.set((r.i_tref + j) * cap + i, y);
-                hi.set((r.i_tw + j) * cap + i, w);
-            }
-            for (a, &ca) in c.iter().enumerate() {
-                hi.set((r.i_c + a) * cap + i, ca);
-            }
-        }
+        });
     }
 
     /// Uploads the packed chunk of `n` frames, dispatches it and starts reading back its first
@@ -453,6 +374,7 @@ impl WgpuBackend {
 
     /// Waits for a submitted chunk and copies its results into `host_out`.
     fn finish(&mut self, p: Pending) -> Result<(), BackendError> {
+        let t = Instant::now();
         self.device
             .poll(wgpu::PollType::Wait { submission_index: Some(p.index), timeout: None })
             .map_err(|e| self.fail(format!("waiting for the device: {e}")))?;
@@ -461,6 +383,8 @@ impl WgpuBackend {
             Ok(Err(e)) => return Err(self.fail(format!("mapping the results: {e}"))),
             Err(_) => return Err(self.fail("the results were never mapped".into())),
         }
+        self.phases.wait_s += t.elapsed().as_secs_f64();
+        let t = Instant::now();
         let words = p.rows * p.stride;
         {
             let slice = self.staging[p.slot].slice(..(self.host_out.word() * words) as u64);
@@ -468,6 +392,7 @@ impl WgpuBackend {
             self.host_out.copy_from_bytes(&view);
         }
         self.staging[p.slot].unmap();
+        self.phases.read_s += t.elapsed().as_secs_f64();
         if let Some(e) = self.errors.lock().unwrap_or_else(|p| p.into_inner()).take() {
             return Err(self.fail(e));
         }
@@ -488,19 +413,28 @@ impl WgpuBackend {
         for c in 0..n.div_ceil(cap) {
             let (a, b) = (c * cap, ((c + 1) * cap).min(n));
             let slot = c % 2;
+            let t = Instant::now();
             self.pack_chunk(&frames[a..b], &proxies[a * np..b * np], slot);
+            self.phases.pack_s += t.elapsed().as_secs_f64();
+            let t = Instant::now();
             let pending = self.submit(slot, b - a, linearize);
+            self.phases.submit_s += t.elapsed().as_secs_f64();
             if let Some((p, range)) = in_flight.replace((pending, a..b)) {
                 let (s, st) = (p.slot, p.stride);
                 self.finish(p)?;
+                let t = Instant::now();
                 unpack(range, self, s, st);
+                self.phases.unpack_s += t.elapsed().as_secs_f64();
             }
         }
         if let Some((p, range)) = in_flight {
             let (s, st) = (p.slot, p.stride);
             self.finish(p)?;
+            let t = Instant::now();
             unpack(range, self, s, st);
+            self.phases.unpack_s += t.elapsed().as_secs_f64();
         }
+        self.phases.frames += n as u64;
         Ok(())
     }
 }

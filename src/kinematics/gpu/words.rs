@@ -35,14 +35,6 @@ impl Words {
     }
 
     #[inline]
-    pub(super) fn set(&mut self, i: usize, value: f64) {
-        match self {
-            Words::F32(v) => v[i] = value as f32,
-            Words::F64(v) => v[i] = value,
-        }
-    }
-
-    #[inline]
     pub(super) fn get(&self, i: usize) -> f64 {
         match self {
             Words::F32(v) => v[i] as f64,
@@ -55,6 +47,30 @@ impl Words {
         match self {
             Words::F32(v) => bytemuck::cast_slice(&v[..n]),
             Words::F64(v) => bytemuck::cast_slice(&v[..n]),
+        }
+    }
+
+    /// Sets entry `i` of each of the first `rows` rows of length `stride` to `value(row, i)`,
+    /// for `i < n`, rows in parallel (each row's writes are contiguous).
+    pub(super) fn fill_rows(
+        &mut self,
+        rows: usize,
+        stride: usize,
+        n: usize,
+        value: impl Fn(usize, usize) -> f64 + Sync,
+    ) {
+        use rayon::prelude::*;
+        match self {
+            Words::F32(v) => v[..rows * stride].par_chunks_mut(stride).enumerate().for_each(|(row, w)| {
+                for (i, x) in w[..n].iter_mut().enumerate() {
+                    *x = value(row, i) as f32;
+                }
+            }),
+            Words::F64(v) => v[..rows * stride].par_chunks_mut(stride).enumerate().for_each(|(row, w)| {
+                for (i, x) in w[..n].iter_mut().enumerate() {
+                    *x = value(row, i);
+                }
+            }),
         }
     }
 
