@@ -9,7 +9,7 @@ use super::mcap_out::{partial_path, write_trial, RunInfo};
 use super::shard::{assign, Shard};
 use crate::pipeline::stats::P50P90;
 use crate::pipeline::subject::{calibrate_placed, prepare_subject, read_trial};
-use crate::pipeline::{solve_trial, Context};
+use crate::pipeline::{solve_trial_counted, Context};
 use crate::solve::Calibration;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -24,6 +24,8 @@ pub struct ConvertOptions {
     pub shard: Option<Shard>,
     /// Skip trials whose output exists and records the same input SHA-256.
     pub resume: bool,
+    /// Counters to update as trials and frames finish (for a progress display).
+    pub progress: Option<std::sync::Arc<super::progress::Progress>>,
 }
 
 /// One trial's fate.
@@ -158,9 +160,17 @@ pub fn convert(datasets: &[Dataset], opt: &ConvertOptions, log: &(dyn Fn(&str) +
         groups = groups.into_iter().zip(owner).filter(|(_, o)| *o == s.index).map(|(g, _)| g).collect();
     }
     let total: usize = groups.iter().map(|g| g.trials.len()).sum();
+    if let Some(p) = &opt.progress {
+        let name = |g: &SubjectGroup| &datasets[g.dataset].name;
+        p.plan(groups.iter().flat_map(|g| g.trials.iter().map(move |t| (format!("{}/{}", name(g), t.rel), t.frames))));
+    }
     let done = std::sync::atomic::AtomicUsize::new(0);
     let report = |t: &TrialOutcome| {
         let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        if let Some(p) = &opt.progress {
+            let solved = (t.status == "ok").then_some(t.frames as u64);
+            p.finished(&format!("{}/{}", t.dataset, t.trial), t.status == "failed", solved);
+        }
         let what = match (&t.status[..], &t.error) {
             ("failed", Some(e)) => format!("failed: {e}"),
             (st, _) => format!("{st} ({} frames, {:.2} s)", t.frames, t.solve_s),
@@ -313,7 +323,7 @@ fn subject(
     let solved: Vec<TrialOutcome> = loaded
         .par_iter()
         .map(|(t, out, hash, m)| {
-            let o = solve_one(d, g, t, out, hash, m, &cal);
+            let o = solve_one(d, g, t, out, hash, m, &cal, opt.progress.as_deref());
             report(&o);
             o
         })
@@ -322,6 +332,7 @@ fn subject(
 }
 
 /// Solves one trial and writes its MCAP file.
+#[allow(clippy::too_many_arguments)]
 fn solve_one(
     d: &Dataset,
     g: &SubjectGroup,
@@ -330,9 +341,12 @@ fn solve_one(
     hash: &str,
     trial: &crate::io::MarkerTrial,
     cal: &Calibrated,
+    progress: Option<&super::progress::Progress>,
 ) -> TrialOutcome {
     let fail = |e: String| outcome(d, g, t, out, "failed", Some(e));
-    let r = match solve_trial(&cal.ctx, &t.rel, trial, &cal.calibration, 1) {
+    let unused = std::sync::atomic::AtomicU64::new(0);
+    let frames_done = progress.map_or(&unused, |p| &p.frames_done);
+    let r = match solve_trial_counted(&cal.ctx, &t.rel, trial, &cal.calibration, 1, frames_done) {
         Ok(r) => r,
         Err(e) => return fail(e.to_string()),
     };
@@ -351,6 +365,7 @@ fn solve_one(
         ("adapter", "cpu"),
         ("qp_backend", &format!("{:?}", cal.ctx.settings.qp).to_lowercase()),
         ("frames", &r.proxies.len().to_string()),
+        ("first_sample_time_s", &trial.times.first().copied().unwrap_or(0.0).to_string()),
     ] {
         run.insert(k.into(), v.into());
     }

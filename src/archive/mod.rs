@@ -5,8 +5,11 @@
 pub mod config;
 pub mod convert;
 pub mod discover;
+pub mod export;
 pub mod inspect;
 pub mod mcap_out;
+pub mod merge;
+pub mod progress;
 pub mod schemas;
 pub mod shard;
 pub mod synthetic;

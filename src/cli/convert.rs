@@ -1,11 +1,14 @@
 //! `smocap convert`: whole archives described by `datasets.toml` to MCAP files.
 
 use crate::archive::config::read_datasets;
+use crate::archive::progress::{Display, Mode, Progress};
 use crate::archive::shard::Shard;
 use crate::archive::{convert, ConvertOptions};
 use anyhow::Context as _;
 use clap::Args;
 use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
 
 #[derive(Args, Debug)]
 pub struct ConvertArgs {
@@ -32,6 +35,13 @@ pub struct ConvertArgs {
     /// Write the summary (every trial found, with its status) as JSON here.
     #[arg(long)]
     pub report_json: Option<PathBuf>,
+    /// No progress display and no line per trial (the final table and failures still print).
+    #[arg(long, short)]
+    pub quiet: bool,
+    /// Seconds between plain progress lines when stderr is not a terminal (a terminal shows
+    /// progress bars instead).
+    #[arg(long, default_value_t = 10.0, value_name = "SECONDS")]
+    pub progress_every: f64,
 }
 
 pub fn run(a: ConvertArgs) -> anyhow::Result<u8> {
@@ -40,13 +50,18 @@ pub fn run(a: ConvertArgs) -> anyhow::Result<u8> {
         Some(s) => Some(s),
         None => Shard::from_env(|k| std::env::var(k).ok())?,
     };
+    let progress = Arc::new(Progress::default());
     let opt = ConvertOptions {
         out: a.out.clone(),
         jobs: a.jobs.unwrap_or_else(super::default_threads).max(1),
         shard,
         resume: a.resume,
+        progress: Some(progress.clone()),
     };
-    let summary = convert(&datasets, &opt, &|line| eprintln!("{line}"));
+    let every = Duration::try_from_secs_f64(a.progress_every).context("--progress-every: seconds expected")?;
+    let display = Display::start(progress, Mode::auto(a.quiet, every));
+    let summary = convert(&datasets, &opt, &|line| display.println(line));
+    display.finish();
     print!("{}", summary.table());
     if let Some(p) = &a.report_json {
         std::fs::write(p, serde_json::to_string_pretty(&summary)?)

@@ -6,8 +6,10 @@
 mod bench;
 mod convert;
 mod demo;
+mod export;
 mod inspect;
 mod markers;
+mod merge;
 mod solve;
 mod synth;
 
@@ -40,6 +42,10 @@ pub enum Command {
     Convert(convert::ConvertArgs),
     /// What a converted MCAP file holds: channels, message counts, run metadata, attachments.
     Inspect(inspect::InspectArgs),
+    /// Join the summaries (`--report-json`) of sharded convert runs into one; exit 3 if any trial failed.
+    MergeReports(merge::MergeArgs),
+    /// A converted MCAP file's state channel as an OpenSim motion (`--mot`) and/or a CSV table (`--csv`).
+    Export(export::ExportArgs),
 }
 
 /// Runs the command line; errors are printed with their causes.
@@ -54,6 +60,8 @@ pub fn main() -> ExitCode {
         Command::BenchBatch(a) => bench::run(a),
         Command::Convert(a) => convert::run(a),
         Command::Inspect(a) => inspect::run(a),
+        Command::MergeReports(a) => merge::run(a),
+        Command::Export(a) => export::run(a),
     };
     match result {
         Ok(code) => ExitCode::from(code),

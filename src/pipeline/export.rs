@@ -61,19 +61,28 @@ pub fn motion_table(ctx: &Context, proxies: &[Vec<f64>], times: &[f64]) -> Resul
         return Err(ExportError::Proxies { proxies: p.len(), expected: np });
     }
     let model = &ctx.model;
+    let (mut y, mut dphi) = (vec![0.0; model.ny()], vec![0.0; ctx.proxy.terms.len()]);
+    let frames = proxies.iter().zip(times).map(|(p, &t)| {
+        ctx.proxy.apply(p, &mut y, &mut dphi);
+        (t, y[..model.nq()].to_vec())
+    });
+    Ok(coordinate_table(model, frames))
+}
+
+/// An OpenSim motion from `(time s, coordinates in model order, rad or m)` per frame: `time`,
+/// then every coordinate, rotations in degrees ([`opensim_degrees`]); `inDegrees=yes`.
+pub fn coordinate_table(model: &Model, frames: impl IntoIterator<Item = (f64, Vec<f64>)>) -> Table {
     let deg = opensim_degrees(model);
     let mut columns = vec!["time".to_string()];
     columns.extend(model.coordinates.iter().map(|c| c.name.clone()));
-    let (mut y, mut dphi) = (vec![0.0; model.ny()], vec![0.0; ctx.proxy.terms.len()]);
-    let mut rows = Vec::with_capacity(proxies.len());
-    for (p, &t) in proxies.iter().zip(times) {
-        ctx.proxy.apply(p, &mut y, &mut dphi);
+    let mut rows = Vec::new();
+    for (t, q) in frames {
         let mut row = Vec::with_capacity(columns.len());
         row.push(t);
-        row.extend((0..model.nq()).map(|c| if deg[c] { y[c].to_degrees() } else { y[c] }));
+        row.extend(q.iter().zip(&deg).map(|(&v, &d)| if d { v.to_degrees() } else { v }));
         rows.push(row);
     }
-    Ok(Table { header: vec![("inDegrees".into(), "yes".into())], columns, rows })
+    Table { header: vec![("inDegrees".into(), "yes".into())], columns, rows }
 }
 
 /// Writes every frame of a solved trial (bridged frames included) at the trial's frame times

@@ -15,6 +15,7 @@ use crate::solve::trqp::{FrameIteration, Next};
 use crate::solve::{make_qp, FrameSolver, FrameStats, FrameStatus, SolverSettings, WarmStart};
 use rayon::prelude::*;
 use std::collections::VecDeque;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 /// What every frame of the trial shares.
@@ -36,6 +37,8 @@ pub struct TrialInputs<'a> {
     pub neutral: &'a [f64],
     /// The calibration's proxies: one more start for a segment's first frame.
     pub calibrated: &'a [f64],
+    /// Counts solved frames as they finish (progress display), when given.
+    pub frames_done: Option<&'a AtomicU64>,
 }
 
 /// One solved frame: proxies, statistics, seconds from its start to its end (wall).
@@ -150,6 +153,9 @@ pub fn run_lanes(
             let Next::Done(stats) = lane.next else { continue };
             if lane.it.take().is_some() {
                 results[lane.frame] = Some((lane.p.clone(), stats, lane.started.elapsed().as_secs_f64()));
+                if let Some(c) = inp.frames_done {
+                    c.fetch_add(1, Ordering::Relaxed);
+                }
                 if stats.status != FrameStatus::TooFewMarkers {
                     let old = lane.prev2.take();
                     lane.prev2 = lane.prev.take();

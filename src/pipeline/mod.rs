@@ -15,4 +15,4 @@ pub mod subject;
 pub mod trial;
 
 pub use context::{Context, ContextError};
-pub use trial::{calibrate_subject, solve_trial, solve_trial_with, TrialError, TrialResult};
+pub use trial::{calibrate_subject, solve_trial, solve_trial_counted, solve_trial_with, TrialError, TrialResult};

@@ -15,6 +15,7 @@ use crate::solve::calibrate::track;
 use crate::solve::init::wrap_angle;
 use crate::solve::placement::place_markers;
 use crate::solve::{calibrate, make_qp, Calibration, FrameSolver, FrameStats, FrameStatus};
+use std::sync::atomic::AtomicU64;
 use std::time::Instant;
 
 /// Why a trial could not be solved.
@@ -195,6 +196,19 @@ pub fn solve_trial(
     solve_trial_with(ctx, name, trial, calibration, threads, threads, None)
 }
 
+/// As [`solve_trial`], adding one to `frames_done` as each frame is solved (for progress
+/// displays; bridged frames count too).
+pub fn solve_trial_counted(
+    ctx: &Context,
+    name: &str,
+    trial: &MarkerTrial,
+    calibration: &Calibration,
+    threads: usize,
+    frames_done: &AtomicU64,
+) -> Result<TrialResult, TrialError> {
+    solve(ctx, name, trial, calibration, threads, threads, None, Some(frames_done))
+}
+
 /// Solves every frame of `trial` with the lane scheduler ([`super::lanes`]): the trial is cut
 /// into at most `lanes` segments of at least 100 frames, each cold-started and walked by one
 /// lane; evaluations go to `backend` (the CPU backend when `None`), the QPs to a pool of
@@ -207,6 +221,20 @@ pub fn solve_trial_with(
     threads: usize,
     lanes: usize,
     backend: Option<&mut (dyn BatchBackend + '_)>,
+) -> Result<TrialResult, TrialError> {
+    solve(ctx, name, trial, calibration, threads, lanes, backend, None)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn solve(
+    ctx: &Context,
+    name: &str,
+    trial: &MarkerTrial,
+    calibration: &Calibration,
+    threads: usize,
+    lanes: usize,
+    backend: Option<&mut (dyn BatchBackend + '_)>,
+    frames_done: Option<&AtomicU64>,
 ) -> Result<TrialResult, TrialError> {
     let start = Instant::now();
     let nm = ctx.model.markers.len();
@@ -259,6 +287,7 @@ pub fn solve_trial_with(
         tracking_weights_all: &track_w_all,
         neutral: &neutral,
         calibrated: &calibration.proxies,
+        frames_done,
     };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().ok();
     let run = || match backend {

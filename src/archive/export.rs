@@ -1,0 +1,186 @@
+//! A converted trial back out of its MCAP file: the `/smocap/state` channel (with the frame's
+//! RMSE from `/smocap/residuals` and status from `/smocap/stats`) as an OpenSim motion (`.mot`,
+//! the columns and degrees of `smocap solve --mot-dir`) or a CSV table.
+
+use crate::io::sto::{self, StoError};
+use crate::model::Model;
+use crate::pipeline::export::coordinate_table;
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// Errors reading a converted trial or writing its export.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    #[error("{file}: {source}")]
+    Io { file: String, source: std::io::Error },
+    #[error("{file}: {source}")]
+    Mcap { file: String, source: mcap::McapError },
+    #[error("{file}: {what}")]
+    Content { file: String, what: String },
+    #[error("{file}: {source}")]
+    Csv { file: String, source: csv::Error },
+    #[error(transparent)]
+    Sto(#[from] StoError),
+}
+
+/// One frame of the state channel (times in s since the trial's first sample).
+#[derive(Clone, Debug, Deserialize)]
+pub struct StateMsg {
+    pub time: f64,
+    pub frame: usize,
+    /// Coordinates by name (rad or m).
+    pub q: BTreeMap<String, f64>,
+    /// Scale factors `[x, y, z]` by body.
+    pub s: BTreeMap<String, [f64; 3]>,
+}
+
+/// One frame as read back: the state, RMS marker error (m) and solver status.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    pub state: StateMsg,
+    pub rmse_m: Option<f64>,
+    pub status: Option<String>,
+}
+
+/// A converted trial read back.
+#[derive(Clone, Debug)]
+pub struct TrialRecord {
+    /// Frames in frame order.
+    pub frames: Vec<Frame>,
+    /// The trial's first sample time (s), added to the messages' times (0 when not recorded).
+    pub time_offset: f64,
+    /// The `scaled_model.osim` attachment, when the file has one.
+    pub scaled_model: Option<String>,
+}
+
+/// Reads the frames of `path` (a file written by `smocap convert`).
+pub fn read_trial_record(path: &Path) -> Result<TrialRecord, ExportError> {
+    let file = path.display().to_string();
+    let buf = std::fs::read(path).map_err(|source| ExportError::Io { file: file.clone(), source })?;
+    let mc = |source| ExportError::Mcap { file: file.clone(), source };
+    let bad = |what: String| ExportError::Content { file: file.clone(), what };
+    let summary = mcap::Summary::read(&buf).map_err(mc)?;
+    let (mut time_offset, mut scaled_model) = (0.0, None);
+    if let Some(summary) = &summary {
+        for idx in &summary.metadata_indexes {
+            let m = mcap::read::metadata(&buf, idx).map_err(mc)?;
+            if let Some(v) = m.metadata.get("first_sample_time_s").filter(|_| m.name == "smocap.run") {
+                time_offset = v.parse().map_err(|_| bad(format!("first_sample_time_s '{v}' is not a number")))?;
+            }
+        }
+        if let Some(idx) = summary.attachment_indexes.iter().find(|a| a.name == "scaled_model.osim") {
+            let a = mcap::read::attachment(&buf, idx).map_err(mc)?;
+            scaled_model = Some(String::from_utf8_lossy(&a.data).into_owned());
+        }
+    }
+    let mut states = BTreeMap::new();
+    let mut rmse = BTreeMap::new();
+    let mut status = BTreeMap::new();
+    #[derive(Deserialize)]
+    struct Tagged {
+        frame: usize,
+        rmse: Option<f64>,
+        status: Option<String>,
+    }
+    for msg in mcap::MessageStream::new(&buf).map_err(mc)? {
+        let msg = msg.map_err(mc)?;
+        let topic = msg.channel.topic.as_str();
+        let json = |e: serde_json::Error| bad(format!("{topic} message {}: {e}", msg.sequence));
+        match topic {
+            "/smocap/state" => {
+                let s: StateMsg = serde_json::from_slice(&msg.data).map_err(json)?;
+                states.insert(s.frame, s);
+            }
+            "/smocap/residuals" => {
+                let t: Tagged = serde_json::from_slice(&msg.data).map_err(json)?;
+                rmse.insert(t.frame, t.rmse);
+            }
+            "/smocap/stats" => {
+                let t: Tagged = serde_json::from_slice(&msg.data).map_err(json)?;
+                status.insert(t.frame, t.status);
+            }
+            _ => {}
+        }
+    }
+    if states.is_empty() {
+        return Err(bad("no /smocap/state messages (not a file written by smocap convert?)".into()));
+    }
+    let frames = states
+        .into_iter()
+        .map(|(f, state)| Frame { state, rmse_m: rmse.get(&f).copied().flatten(), status: status.remove(&f).flatten() })
+        .collect();
+    Ok(TrialRecord { frames, time_offset, scaled_model })
+}
+
+/// The model of a record: its attached scaled model (coordinate order and motion types are the
+/// converted model's).
+pub fn attached_model(rec: &TrialRecord, file: &Path) -> Result<Model, ExportError> {
+    let bad = |what: String| ExportError::Content { file: file.display().to_string(), what };
+    let text = rec.scaled_model.as_deref().ok_or_else(|| bad("no scaled_model.osim attachment".into()))?;
+    let (model, _) = crate::io::osim::parse_osim(text, "scaled_model.osim")
+        .map_err(|e| bad(format!("its scaled_model.osim: {e}")))?;
+    Ok(model)
+}
+
+/// Writes the record as an OpenSim motion (`Coordinates`, `inDegrees=yes`, every coordinate of
+/// `model` in model order, rotations in degrees: as `smocap solve --mot-dir`).
+pub fn write_mot(rec: &TrialRecord, model: &Model, out: &Path) -> Result<(), ExportError> {
+    let mut rows = Vec::with_capacity(rec.frames.len());
+    for f in &rec.frames {
+        let q = model
+            .coordinates
+            .iter()
+            .map(|c| {
+                f.state.q.get(&c.name).copied().ok_or_else(|| ExportError::Content {
+                    file: out.display().to_string(),
+                    what: format!("frame {} has no coordinate '{}' of the model", f.state.frame, c.name),
+                })
+            })
+            .collect::<Result<Vec<f64>, _>>()?;
+        rows.push((f.state.time + rec.time_offset, q));
+    }
+    Ok(sto::write_sto(out, "Coordinates", &coordinate_table(model, rows))?)
+}
+
+/// Writes the record as CSV: `time` (s), `frame`, every coordinate (rad or m; in `model` order
+/// when given, else by name), `scale_<body>_x|y|z` per body, `rmse_m` (RMS marker error, m;
+/// empty when no marker was observed) and `status`; one row per frame.
+pub fn write_csv(rec: &TrialRecord, model: Option<&Model>, out: &Path) -> Result<(), ExportError> {
+    let first = &rec.frames[0].state;
+    let coords: Vec<String> = match model {
+        Some(m) => m.coordinates.iter().map(|c| c.name.clone()).filter(|n| first.q.contains_key(n)).collect(),
+        None => first.q.keys().cloned().collect(),
+    };
+    let bodies: Vec<String> = match model {
+        Some(m) => m.bodies.iter().map(|b| b.name.clone()).filter(|n| first.s.contains_key(n)).collect(),
+        None => first.s.keys().cloned().collect(),
+    };
+    let file = out.display().to_string();
+    let cv = |source| ExportError::Csv { file: file.clone(), source };
+    let mut w = csv::Writer::from_path(out).map_err(cv)?;
+    let mut header = vec!["time".to_string(), "frame".to_string()];
+    header.extend(coords.iter().cloned());
+    header.extend(bodies.iter().flat_map(|b| ["x", "y", "z"].map(|a| format!("scale_{b}_{a}"))));
+    header.extend(["rmse_m".to_string(), "status".to_string()]);
+    w.write_record(&header).map_err(cv)?;
+    let num = |v: Option<f64>| {
+        let mut s = String::new();
+        if let Some(v) = v {
+            sto::push_number(&mut s, v);
+        }
+        s
+    };
+    for f in &rec.frames {
+        let s = &f.state;
+        let mut row = vec![num(Some(s.time + rec.time_offset)), s.frame.to_string()];
+        row.extend(coords.iter().map(|c| num(s.q.get(c).copied())));
+        for b in &bodies {
+            row.extend((0..3).map(|a| num(s.s.get(b).map(|v| v[a]))));
+        }
+        row.push(num(f.rmse_m));
+        row.push(f.status.clone().unwrap_or_default());
+        w.write_record(&row).map_err(cv)?;
+    }
+    w.flush().map_err(|source| ExportError::Io { file: file.clone(), source })
+}

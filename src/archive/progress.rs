@@ -1,0 +1,187 @@
+//! Progress of a conversion: counters the run updates as trials and frames finish
+//! ([`Progress`]), and their display on stderr ([`Display`]): two progress bars (trials, frames
+//! with throughput) on a terminal, a plain status line every few seconds otherwise.
+
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
+use std::sync::mpsc::{channel, RecvTimeoutError, Sender};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// What a run has done so far; shared between the workers and the display.
+#[derive(Debug, Default)]
+pub struct Progress {
+    pub trials_total: AtomicU64,
+    pub trials_done: AtomicU64,
+    pub trials_failed: AtomicU64,
+    /// Frames expected (from file headers), corrected as trials finish.
+    pub frames_total: AtomicU64,
+    /// Frames solved; the solver adds one per frame ([`crate::pipeline::solve_trial_counted`]).
+    pub frames_done: AtomicU64,
+    expected: Mutex<HashMap<String, u64>>,
+}
+
+/// The counters at one moment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Snapshot {
+    pub trials_total: u64,
+    pub trials_done: u64,
+    pub trials_failed: u64,
+    pub frames_total: u64,
+    pub frames_done: u64,
+}
+
+impl Progress {
+    /// Declares the trials to come: a key (e.g. `dataset/trial`) and the frames expected of each.
+    pub fn plan(&self, trials: impl IntoIterator<Item = (String, u64)>) {
+        let mut map = self.expected.lock().unwrap_or_else(|e| e.into_inner());
+        for (k, frames) in trials {
+            self.trials_total.fetch_add(1, Relaxed);
+            self.frames_total.fetch_add(frames, Relaxed);
+            map.insert(k, frames);
+        }
+    }
+
+    /// Records that trial `key` finished: `solved` frames when it was solved, `None` when it was
+    /// skipped or failed before solving (its expected frames leave the total).
+    pub fn finished(&self, key: &str, failed: bool, solved: Option<u64>) {
+        let expected = self.expected.lock().unwrap_or_else(|e| e.into_inner()).remove(key).unwrap_or(0);
+        let actual = solved.unwrap_or(0);
+        if actual >= expected {
+            self.frames_total.fetch_add(actual - expected, Relaxed);
+        } else {
+            let _ = self.frames_total.fetch_update(Relaxed, Relaxed, |t| Some(t.saturating_sub(expected - actual)));
+        }
+        self.trials_done.fetch_add(1, Relaxed);
+        if failed {
+            self.trials_failed.fetch_add(1, Relaxed);
+        }
+    }
+
+    pub fn snapshot(&self) -> Snapshot {
+        Snapshot {
+            trials_total: self.trials_total.load(Relaxed),
+            trials_done: self.trials_done.load(Relaxed),
+            trials_failed: self.trials_failed.load(Relaxed),
+            frames_total: self.frames_total.load(Relaxed),
+            frames_done: self.frames_done.load(Relaxed),
+        }
+    }
+}
+
+/// The plain status line: trials done of total, failures, frames, wall throughput.
+pub fn status_line(s: &Snapshot, elapsed_s: f64) -> String {
+    let rate = if elapsed_s > 0.0 { s.frames_done as f64 / elapsed_s } else { 0.0 };
+    format!(
+        "{}/{} trials ({} failed), {}/{} frames, {:.0} frames/s, {:.1} s",
+        s.trials_done, s.trials_total, s.trials_failed, s.frames_done, s.frames_total, rate, elapsed_s
+    )
+}
+
+/// How progress is shown.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Mode {
+    /// Progress bars (trials; frames with frames/s) on stderr, a terminal.
+    Bars,
+    /// A `progress:` line on stderr every `every`, a `done:` line at the end, and the run's
+    /// own lines (one per trial).
+    Lines { every: Duration },
+    /// Nothing but what the caller prints itself.
+    Quiet,
+}
+
+impl Mode {
+    /// Bars when stderr is a terminal, plain lines every `every` otherwise; `Quiet` when `quiet`.
+    pub fn auto(quiet: bool, every: Duration) -> Mode {
+        use std::io::IsTerminal;
+        match (quiet, std::io::stderr().is_terminal()) {
+            (true, _) => Mode::Quiet,
+            (false, true) => Mode::Bars,
+            (false, false) => Mode::Lines { every },
+        }
+    }
+}
+
+/// A running display of a [`Progress`]; [`Display::finish`] ends it.
+pub struct Display {
+    mode: Mode,
+    progress: Arc<Progress>,
+    start: Instant,
+    bars: Option<(MultiProgress, ProgressBar, ProgressBar)>,
+    stop: Option<Sender<()>>,
+    ticker: Option<JoinHandle<()>>,
+}
+
+impl Display {
+    pub fn start(progress: Arc<Progress>, mode: Mode) -> Display {
+        let start = Instant::now();
+        let bars = (mode == Mode::Bars).then(|| {
+            let multi = MultiProgress::with_draw_target(ProgressDrawTarget::stderr());
+            let style = |t: &str| ProgressStyle::with_template(t).unwrap_or_else(|_| ProgressStyle::default_bar());
+            let trials = multi.add(ProgressBar::new(0));
+            trials.set_style(style("trials [{bar:32.cyan/blue}] {pos}/{len} {msg} ({elapsed})"));
+            let frames = multi.add(ProgressBar::new(0));
+            frames.set_style(style("frames [{bar:32.green/blue}] {human_pos}/{human_len} {per_sec} eta {eta}"));
+            (multi, trials, frames)
+        });
+        let (stop, rx) = channel::<()>();
+        let tick = match mode {
+            Mode::Bars => Some(Duration::from_millis(100)),
+            Mode::Lines { every } => Some(every.max(Duration::from_millis(10))),
+            Mode::Quiet => None,
+        };
+        let ticker = tick.map(|every| {
+            let (p, b) = (progress.clone(), bars.as_ref().map(|(_, t, f)| (t.clone(), f.clone())));
+            std::thread::spawn(move || loop {
+                match rx.recv_timeout(every) {
+                    Err(RecvTimeoutError::Timeout) => {}
+                    _ => return,
+                }
+                let s = p.snapshot();
+                match &b {
+                    Some((t, f)) => update_bars(t, f, &s),
+                    None => eprintln!("progress: {}", status_line(&s, start.elapsed().as_secs_f64())),
+                }
+            })
+        });
+        Display { mode, progress, start, bars, stop: Some(stop), ticker }
+    }
+
+    /// Prints a line of the run (a trial's fate, a note) without tearing the bars.
+    pub fn println(&self, line: &str) {
+        match (&self.bars, self.mode) {
+            (_, Mode::Quiet) => {}
+            (Some((m, ..)), _) => {
+                let _ = m.println(line);
+            }
+            (None, _) => eprintln!("{line}"),
+        }
+    }
+
+    /// Stops the display; plain lines end with a `done:` line.
+    pub fn finish(mut self) {
+        drop(self.stop.take());
+        if let Some(t) = self.ticker.take() {
+            let _ = t.join();
+        }
+        let s = self.progress.snapshot();
+        if let Some((_, t, f)) = &self.bars {
+            update_bars(t, f, &s);
+            t.finish();
+            f.finish();
+        }
+        if let Mode::Lines { .. } = self.mode {
+            eprintln!("done: {}", status_line(&s, self.start.elapsed().as_secs_f64()));
+        }
+    }
+}
+
+fn update_bars(trials: &ProgressBar, frames: &ProgressBar, s: &Snapshot) {
+    trials.set_length(s.trials_total);
+    trials.set_position(s.trials_done);
+    trials.set_message(if s.trials_failed > 0 { format!("{} failed", s.trials_failed) } else { String::new() });
+    frames.set_length(s.frames_total.max(s.frames_done));
+    frames.set_position(s.frames_done);
+}
