@@ -10,6 +10,7 @@ pub mod mcap_out;
 pub mod schemas;
 pub mod shard;
 pub mod synthetic;
+pub mod trial_job;
 
 pub use convert::{convert, ConvertOptions, ConvertSummary, TrialOutcome};
 
