@@ -292,3 +292,104 @@ fn shipped_datasets_toml_parses_and_resolves_paths_against_its_folder() {
     let err = read_datasets(path, Some("nope")).unwrap_err().to_string();
     assert!(err.contains("synthetic, gait2354_subject01"), "{err}");
 }
+
+/// The `smocap.run` metadata and the `settings.json` attachment of a converted trial.
+fn run_and_settings(path: &Path) -> (std::collections::BTreeMap<String, String>, serde_json::Value) {
+    let buf = std::fs::read(path).unwrap();
+    let summary = mcap::Summary::read(&buf).unwrap().unwrap();
+    let run = mcap::read::metadata(&buf, &summary.metadata_indexes[0]).unwrap().metadata;
+    let idx = summary.attachment_indexes.iter().find(|a| a.name == "settings.json").unwrap();
+    let settings = serde_json::from_slice(&mcap::read::attachment(&buf, idx).unwrap().data).unwrap();
+    (run, settings)
+}
+
+#[test]
+fn datasets_toml_rate_and_settings_override_the_files_and_the_defaults_and_are_recorded() {
+    let (dir, toml) = archive("overrides", 1, 1, 20);
+    let text = std::fs::read_to_string(&toml).unwrap();
+    std::fs::write(&toml, text + "rate = 50.0\nsettings = { max_iterations = 2, min_markers = 4 }\n").unwrap();
+    let ds = read_datasets(&toml, None).unwrap();
+    assert_eq!(ds[0].rate, Some(50.0));
+    let out = dir.join("out");
+    let o = smocap(&["convert", toml.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mcap_path = out.join("lab/subj01/walk01.mcap");
+    let (run, settings) = run_and_settings(&mcap_path);
+    assert_eq!((run["rate_hz"].as_str(), run["rate_source"].as_str()), ("50", "datasets.toml"));
+    let overrides: serde_json::Value = serde_json::from_str(&run["settings_overrides"]).unwrap();
+    assert_eq!(overrides, serde_json::json!({"max_iterations": 2, "min_markers": 4}));
+    assert_eq!((settings["max_iterations"].as_u64(), settings["min_markers"].as_u64()), (Some(2), Some(4)));
+    assert_eq!(settings["residual_tol_m"].as_f64(), Some(1e-6), "other settings keep their defaults");
+    // Frame times follow the overriding rate (the files say 100 Hz); the solver kept to its cap.
+    let buf = std::fs::read(&mcap_path).unwrap();
+    let mut n = 0;
+    for m in mcap::MessageStream::new(&buf).unwrap() {
+        let m = m.unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        if m.channel.topic == "/smocap/stats" {
+            let f = v["frame"].as_u64().unwrap();
+            assert_eq!(m.log_time, f * 20_000_000, "frame {f} at 50 Hz");
+            assert!(v["iterations"].as_u64().unwrap() <= 2, "{v}");
+            n += 1;
+        }
+    }
+    assert_eq!(n, 20);
+    // Without overrides: the file's rate, no overrides recorded.
+    let (dir2, toml2) = archive("no-overrides", 1, 1, 20);
+    let out2 = dir2.join("out");
+    assert!(smocap(&["convert", toml2.to_str().unwrap(), "--out", out2.to_str().unwrap()]).status.success());
+    let (run2, settings2) = run_and_settings(&out2.join("lab/subj01/walk01.mcap"));
+    assert_eq!((run2["rate_hz"].as_str(), run2["rate_source"].as_str()), ("100", "file"));
+    assert_eq!(run2["settings_overrides"], "{}");
+    assert_eq!(settings2["max_iterations"].as_u64(), Some(20));
+}
+
+#[test]
+fn bad_overrides_in_datasets_toml_are_clear_errors() {
+    let (_dir, toml) = archive("bad-overrides", 1, 1, 5);
+    let text = std::fs::read_to_string(&toml).unwrap();
+    let err = |extra: &str| {
+        std::fs::write(&toml, text.clone() + extra).unwrap();
+        read_datasets(&toml, None).unwrap_err().to_string()
+    };
+    let e = err("settings = { max_iter = 3 }\n");
+    assert!(e.contains("max_iter`") && e.contains("max_iterations") && e.contains("'lab'"), "{e}");
+    let e = err("settings = { max_iterations = \"many\" }\n");
+    assert!(e.contains("max_iterations"), "{e}");
+    let e = err("rate = 0.0\n");
+    assert!(e.contains("rate"), "{e}");
+}
+
+/// A trial whose output fails mid-way (its temporary file is `/dev/full`: "no space left" once
+/// the first chunk is flushed) leaves no file with its final name, no temporary file, and is
+/// reported failed with the frame it stopped at; the other trials convert.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_trial_failing_mid_stream_leaves_no_output_and_is_reported_failed() {
+    let (dir, toml) = archive("midway", 1, 2, 120);
+    let out = dir.join("out");
+    std::fs::create_dir_all(out.join("lab/subj01")).unwrap();
+    let partial = out.join("lab/subj01/walk01.mcap.partial");
+    std::os::unix::fs::symlink("/dev/full", &partial).unwrap();
+    let rep = dir.join("report.json");
+    let o = smocap(&[
+        "convert",
+        toml.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--report-json",
+        rep.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    let r = report(&rep);
+    let t = &r["trials"][0];
+    assert_eq!(t["status"], "failed", "{r}");
+    let e = t["error"].as_str().unwrap();
+    let frame: usize = e.split("frame ").nth(1).and_then(|s| s.split(':').next()).and_then(|s| s.parse().ok()).unwrap();
+    assert!(frame > 0 && frame < 119, "failed mid-way: {e}");
+    assert!(e.contains("No space left"), "{e}");
+    assert_eq!(r["trials"][1]["status"], "ok", "{r}");
+    assert!(!out.join("lab/subj01/walk01.mcap").exists());
+    assert!(std::fs::symlink_metadata(&partial).is_err(), "temporary file removed");
+    assert_eq!(files(&out, ".mcap").len(), 1);
+}

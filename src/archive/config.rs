@@ -9,6 +9,8 @@
 //! static = "{subject}/static*.c3d"  # optional: the static trial of each subject (glob)
 //! model = "model.osim"              # optional (the shipped model by default), with
 //! markerset, profile, scale_setup, ik_setup, place_markers, qp, units, up
+//! rate = 120.0                      # optional: frame rate (Hz) overriding the files'
+//! settings = { max_iterations = 30 } # optional: solver settings overridden (a profile's [solver] keys)
 //! ```
 
 use crate::pipeline::convention::{InputOptions, Units, UpAxis};
@@ -74,6 +76,14 @@ pub struct Dataset {
     pub units: Option<Units>,
     pub up: Option<UpAxis>,
     pub synthetic: Option<SyntheticSpec>,
+    /// Frame rate (Hz) that overrides the files' rate; frame times become
+    /// `t₀ + (frame number − first frame number) / rate` (see [`crate::io::MarkerTrial::set_rate`]).
+    pub rate: Option<f64>,
+    /// Solver settings overridden for this dataset, applied after the profile, the OpenSim
+    /// setups, `place_markers` and `qp` (keys and values as a profile's `[solver]` table; see
+    /// [`crate::solve::SolverSettings`]).
+    #[serde(default)]
+    pub settings: toml::Table,
 }
 
 impl Dataset {
@@ -131,6 +141,12 @@ pub fn read_datasets(path: &Path, only: Option<&str>) -> Result<Vec<Dataset>, Co
         }
         if d.root.is_none() && d.synthetic.is_none() {
             return Err(invalid("`root` is required (but for synthetic datasets)"));
+        }
+        if d.rate.is_some_and(|r| !(r.is_finite() && r > 0.0)) {
+            return Err(invalid("`rate` must be a positive number of frames per second"));
+        }
+        if let Err(e) = crate::solve::SolverSettings::default().with_overrides(&d.settings) {
+            return Err(invalid(&format!("[settings]: {e}")));
         }
         if out.iter().any(|o: &Dataset| o.name == d.name) {
             return Err(invalid("two datasets have this name"));

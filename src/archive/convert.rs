@@ -5,12 +5,12 @@
 use super::config::Dataset;
 use super::discover::{discover, SubjectGroup, TrialEntry};
 use super::inspect::recorded_input_hash;
-use super::mcap_out::{partial_path, write_trial, RunInfo};
+use super::mcap_out::{partial_path, RunInfo};
+use super::trial_job::{read_for, solve_and_write, Calibrated};
 use super::shard::{assign, Shard};
 use crate::pipeline::stats::P50P90;
-use crate::pipeline::subject::{calibrate_placed, prepare_subject, read_trial};
-use crate::pipeline::{solve_trial_counted, Context};
-use crate::solve::Calibration;
+use crate::pipeline::convention::InputOptions;
+use crate::pipeline::subject::{calibrate_placed, prepare_subject};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -217,15 +217,16 @@ fn outcome(
     }
 }
 
-/// Everything one subject needs to write its trials.
-struct Calibrated {
-    ctx: Context,
-    calibration: Calibration,
-    settings_json: String,
-    scaled_model: Option<String>,
+/// A failed trial; a temporary file an interrupted run left for it is removed (a trial that is
+/// converted overwrites its own).
+fn failed(d: &Dataset, g: &SubjectGroup, t: &TrialEntry, out: &Path, why: String) -> TrialOutcome {
+    let _ = std::fs::remove_file(partial_path(out));
+    outcome(d, g, t, out, "failed", Some(why))
 }
 
-/// Converts one subject's trials (those not already done when resuming).
+/// Converts one subject's trials (those not already done when resuming). Trials are read one at
+/// a time as they are solved (a subject without a static trial first reads all its motion trials,
+/// done ones included, to calibrate on them as an uninterrupted run would).
 fn subject(
     d: &Dataset,
     g: &SubjectGroup,
@@ -238,9 +239,9 @@ fn subject(
         let out = output_path(&opt.out, &d.name, &t.rel);
         let hash = std::fs::read(&t.path).map(|b| super::sha256_hex(&b));
         match hash {
-            Err(e) => outcomes.push(outcome(d, g, t, &out, "failed", Some(format!("{}: {e}", t.path.display())))),
+            Err(e) => outcomes.push(failed(d, g, t, &out, format!("{}: {e}", t.path.display()))),
             Ok(h) if opt.resume && out.is_file() && recorded_input_hash(&out).as_deref() == Some(h.as_str()) => {
-                // A temporary file left by an interrupted rerun is not needed.
+                // A temporary file left by an interrupted run is not needed.
                 let _ = std::fs::remove_file(partial_path(&out));
                 outcomes.push(outcome(d, g, t, &out, "skipped", None))
             }
@@ -252,56 +253,51 @@ fn subject(
         return outcomes;
     }
     let fail_all = |why: String| -> Vec<TrialOutcome> {
-        todo.iter().map(|(t, out, _)| outcome(d, g, t, out, "failed", Some(why.clone()))).inspect(report).collect()
+        todo.iter().map(|(t, out, _)| failed(d, g, t, out, why.clone())).inspect(report).collect()
     };
-    let sub = match prepare_subject(&d.subject_files(g.static_trial.clone())) {
+    let mut sub = match prepare_subject(&d.subject_files(g.static_trial.clone())) {
         Ok(s) => s,
         Err(e) => return [outcomes, fail_all(format!("subject setup: {e}"))].concat(),
     };
+    if !d.settings.is_empty() {
+        match sub.ctx.settings.with_overrides(&d.settings) {
+            Ok(s) => sub.ctx.settings = s,
+            Err(e) => return [outcomes, fail_all(format!("datasets.toml [settings]: {e}"))].concat(),
+        }
+        sub.ctx.settings.qp = crate::solve::backend_for(sub.ctx.settings.qp, &sub.ctx.proxy);
+    }
     let input = d.input_options();
-    let static_trial = match &sub.static_path {
-        Some(p) => match read_trial(&sub.ctx, p, &input) {
-            Ok((t, _)) => Some((p.display().to_string(), t)),
+    // Calibrate on the static trial, else on the motion trials whose markers match the model's.
+    let cal_input: Vec<(String, crate::io::MarkerTrial)> = match &sub.static_path {
+        Some(p) => match read_for(d, &sub.ctx, p, &input) {
+            Ok(t) => vec![(p.display().to_string(), t)],
             Err(e) => return [outcomes, fail_all(format!("static trial: {e}"))].concat(),
         },
-        None => None,
-    };
-    let mut loaded = Vec::new();
-    for (t, out, hash) in &todo {
-        match read_trial(&sub.ctx, &t.path, &input) {
-            Ok((m, _)) => loaded.push((*t, out, hash, m)),
-            Err(e) => {
-                let o = outcome(d, g, t, out, "failed", Some(e.to_string()));
-                report(&o);
-                outcomes.push(o);
-            }
-        }
-    }
-    // Calibrate on the static trial, else on the motion trials whose markers match the model's.
-    let cal_input: Vec<(&str, &crate::io::MarkerTrial)> = match &static_trial {
-        Some((n, t)) => vec![(n.as_str(), t)],
-        None => loaded
+        None => g
+            .trials
             .iter()
-            .filter(|(t, .., m)| {
-                crate::pipeline::trial::match_markers(&sub.ctx, &t.rel, m)
+            .filter_map(|t| read_for(d, &sub.ctx, &t.path, &input).ok().map(|m| (t.rel.clone(), m)))
+            .filter(|(rel, m)| {
+                crate::pipeline::trial::match_markers(&sub.ctx, rel, m)
                     .is_ok_and(|x| x.columns.iter().any(Option::is_some))
             })
-            .map(|(t, .., m)| (t.rel.as_str(), m))
             .collect(),
     };
     let cal = if cal_input.is_empty() {
         Err("no trial to calibrate on".to_string())
     } else {
-        calibrate_placed(&sub.ctx, &cal_input).map_err(|e| format!("calibration failed: {e}"))
+        let refs: Vec<(&str, &crate::io::MarkerTrial)> = cal_input.iter().map(|(n, t)| (n.as_str(), t)).collect();
+        calibrate_placed(&sub.ctx, &refs).map_err(|e| format!("calibration failed: {e}"))
     };
+    drop(cal_input);
     let cal = match cal {
         Ok((calibration, placed)) => {
-            let ctx = placed.unwrap_or(sub.ctx);
+            let ctx = placed.as_ref().unwrap_or(&sub.ctx);
             let source = d.model.as_ref().filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("osim")));
             let text = source.and_then(|p| std::fs::read_to_string(p).ok());
             let name = source.map(|p| p.display().to_string()).unwrap_or_default();
             let scaled_model = crate::pipeline::export::scaled_osim(
-                &ctx,
+                ctx,
                 &calibration,
                 text.as_deref().map(|t| (t, name.as_str())),
                 crate::io::osim::MassScaling::default(),
@@ -309,21 +305,14 @@ fn subject(
             .ok()
             .map(|(m, _)| m);
             let settings_json = serde_json::to_string_pretty(&ctx.settings).unwrap_or_default();
-            Calibrated { ctx, calibration, settings_json, scaled_model }
+            Calibrated { base: sub.ctx, placed, calibration, settings_json, scaled_model }
         }
-        Err(why) => {
-            let failed: Vec<TrialOutcome> = loaded
-                .iter()
-                .map(|(t, out, ..)| outcome(d, g, t, out, "failed", Some(why.clone())))
-                .inspect(report)
-                .collect();
-            return [outcomes, failed].concat();
-        }
+        Err(why) => return [outcomes, fail_all(why)].concat(),
     };
-    let solved: Vec<TrialOutcome> = loaded
+    let solved: Vec<TrialOutcome> = todo
         .par_iter()
-        .map(|(t, out, hash, m)| {
-            let o = solve_one(d, g, t, out, hash, m, &cal, opt.progress.as_deref());
+        .map(|(t, out, hash)| {
+            let o = solve_one(d, g, t, out, hash, &input, &cal, opt.progress.as_deref());
             report(&o);
             o
         })
@@ -331,7 +320,7 @@ fn subject(
     [outcomes, solved].concat()
 }
 
-/// Solves one trial and writes its MCAP file.
+/// Reads one trial, solves it and streams it to its MCAP file.
 #[allow(clippy::too_many_arguments)]
 fn solve_one(
     d: &Dataset,
@@ -339,54 +328,48 @@ fn solve_one(
     t: &TrialEntry,
     out: &Path,
     hash: &str,
-    trial: &crate::io::MarkerTrial,
+    input: &InputOptions,
     cal: &Calibrated,
     progress: Option<&super::progress::Progress>,
 ) -> TrialOutcome {
-    let fail = |e: String| outcome(d, g, t, out, "failed", Some(e));
-    let unused = std::sync::atomic::AtomicU64::new(0);
-    let frames_done = progress.map_or(&unused, |p| &p.frames_done);
-    let r = match solve_trial_counted(&cal.ctx, &t.rel, trial, &cal.calibration, 1, frames_done) {
-        Ok(r) => r,
-        Err(e) => return fail(e.to_string()),
+    let fail = |e: String| failed(d, g, t, out, e);
+    let trial = match read_for(d, &cal.base, &t.path, input) {
+        Ok(m) => m,
+        Err(e) => return fail(e),
     };
+    let ctx = cal.ctx();
+    let overrides = serde_json::to_string(&d.settings).unwrap_or_default();
     let mut run = RunInfo::new();
     for (k, v) in [
         ("smocap_version", env!("CARGO_PKG_VERSION")),
         ("git_revision", option_env!("SMOCAP_GIT_REV").unwrap_or("unknown")),
         ("settings_sha256", &super::sha256_hex(cal.settings_json.as_bytes())),
+        ("settings_overrides", &overrides),
         ("input_sha256", hash),
         ("input", &t.path.display().to_string()),
         ("dataset", &d.name),
         ("subject", &g.subject),
         ("trial", &t.rel),
-        ("model", &cal.ctx.model_source),
+        ("model", &ctx.model_source),
         ("backend", "cpu"),
         ("adapter", "cpu"),
-        ("qp_backend", &format!("{:?}", cal.ctx.settings.qp).to_lowercase()),
-        ("frames", &r.proxies.len().to_string()),
+        ("qp_backend", &format!("{:?}", ctx.settings.qp).to_lowercase()),
+        ("frames", &trial.n_frames().to_string()),
         ("first_sample_time_s", &trial.times.first().copied().unwrap_or(0.0).to_string()),
+        ("rate_hz", &trial.rate_hz.to_string()),
+        ("rate_source", if d.rate.is_some() { "datasets.toml" } else { "file" }),
     ] {
         run.insert(k.into(), v.into());
     }
-    if let Some(parent) = out.parent() {
-        if let Err(e) = std::fs::create_dir_all(parent) {
-            return fail(format!("{}: {e}", parent.display()));
-        }
-    }
-    if let Err(e) = write_trial(out, &cal.ctx, trial, &r, &run, &cal.settings_json, cal.scaled_model.as_deref()) {
-        let _ = std::fs::remove_file(partial_path(out));
-        return fail(e.to_string());
-    }
-    let ms: Vec<f64> = r.frame_seconds.iter().map(|s| s * 1e3).collect();
-    let it: Vec<f64> = r.stats.iter().map(|s| s.iterations as f64).collect();
-    let rmse: Vec<f64> = r.stats.iter().map(|s| s.rmse_m * 1e3).filter(|x| x.is_finite()).collect();
-    TrialOutcome {
-        frames: r.proxies.len(),
-        solve_s: r.frame_seconds.iter().sum(),
-        ms_per_frame: Some(P50P90::of(&ms)),
-        iterations: Some(P50P90::of(&it)),
-        rmse_mm: (!rmse.is_empty()).then(|| P50P90::of(&rmse)),
-        ..outcome(d, g, t, out, "ok", None)
+    match solve_and_write(out, &t.rel, &trial, cal, &run, progress.map(|p| &p.frames_done)) {
+        Ok(s) => TrialOutcome {
+            frames: s.frames,
+            solve_s: s.solve_s,
+            ms_per_frame: Some(s.ms_per_frame),
+            iterations: Some(s.iterations),
+            rmse_mm: s.rmse_mm,
+            ..outcome(d, g, t, out, "ok", None)
+        },
+        Err(e) => fail(e),
     }
 }

@@ -4,13 +4,15 @@
 //! and `foxglove.SceneUpdate` on `/scene` (observed and model markers as spheres, bones as lines),
 //! JSON-encoded; a `smocap.run` metadata record; the settings and the scaled model attached.
 //!
-//! The file is written as `<name>.partial` and renamed only once its summary is written, so a
-//! file with the final name is always complete.
+//! Frames are written as they are solved ([`TrialWriter`]), so memory does not grow with the
+//! trial's length (the writer holds one zstd chunk, ≤ 1 MiB, and one index entry per chunk). The
+//! file is written as `<name>.partial` and renamed only once its summary is written, so a file
+//! with the final name is always complete; a writer dropped unfinished removes its temporary file.
 
 use super::schemas;
 use crate::io::MarkerTrial;
 use crate::kinematics::cpu::{self, Workspace};
-use crate::pipeline::{Context, TrialResult};
+use crate::pipeline::{Context, SolvedFrame};
 use mcap::records::{MessageHeader, Metadata};
 use nalgebra::{Rotation3, UnitQuaternion};
 use serde_json::{json, Value};
@@ -46,58 +48,94 @@ fn v3(p: &[f64]) -> Value {
     json!({"x": p[0], "y": p[1], "z": p[2]})
 }
 
-/// Writes `result` (solved from `trial` with `ctx`) to `out` via a temporary file; `settings_json`
-/// and `scaled_model` (OpenSim `.osim` text) are attached.
-pub fn write_trial(
-    out: &Path,
-    ctx: &Context,
-    trial: &MarkerTrial,
-    result: &TrialResult,
-    run: &RunInfo,
-    settings_json: &str,
-    scaled_model: Option<&str>,
-) -> Result<(), McapOutError> {
-    let tmp = partial_path(out);
-    let file = tmp.display().to_string();
-    let io = |source| McapOutError::Io { file: file.clone(), source };
-    let mc = |source| McapOutError::Mcap { file: file.clone(), source };
-    let f = std::fs::File::create(&tmp).map_err(io)?;
-    let opts = mcap::WriteOptions::new()
-        .compression(Some(mcap::Compression::Zstd))
-        .profile("")
-        .library(format!("smocap {}", env!("CARGO_PKG_VERSION")));
-    let mut w = opts.create(BufWriter::new(f)).map_err(mc)?;
-    let meta: BTreeMap<String, String> = [
-        ("length_unit", "m"),
-        ("angle_unit", "rad"),
-        ("frame", "world: the model's frame (the marker data rotated into it)"),
-        ("up", &ctx.up.map_or("none".into(), |u| format!("[{}, {}, {}]", u.x + 0.0, u.y + 0.0, u.z + 0.0))),
-        ("log_time", "ns since the trial's first sample time"),
-    ]
-    .into_iter()
-    .map(|(k, v)| (k.to_string(), v.to_string()))
-    .collect();
-    let mut channel = |name: &str, topic: &str, schema: &Value| -> Result<u16, McapOutError> {
-        let id = w.add_schema(name, "jsonschema", schema.to_string().as_bytes()).map_err(mc)?;
-        w.add_channel(id, topic, "json", &meta).map_err(mc)
-    };
-    let ch_state = channel("smocap.State", "/smocap/state", &schemas::state())?;
-    let ch_res = channel("smocap.Residuals", "/smocap/residuals", &schemas::residuals())?;
-    let ch_stats = channel("smocap.SolverStats", "/smocap/stats", &schemas::stats())?;
-    let ch_tf = channel("foxglove.FrameTransforms", "/tf", &schemas::frame_transforms())?;
-    let ch_scene = channel("foxglove.SceneUpdate", "/scene", &schemas::scene_update())?;
+/// A trial's MCAP file being written, frame by frame as frames are solved. Created as
+/// `<out>.partial`; [`TrialWriter::finish`] writes the summary and renames it to `out`. Dropped
+/// unfinished (an error, a panic), it removes the temporary file.
+pub struct TrialWriter<'a> {
+    ctx: &'a Context,
+    trial: &'a MarkerTrial,
+    /// Trial column of each model marker.
+    cols: Vec<Option<usize>>,
+    w: Option<mcap::Writer<BufWriter<std::fs::File>>>,
+    tmp: PathBuf,
+    out: PathBuf,
+    /// Channels: state, residuals, stats, /tf, /scene.
+    ch: [u16; 5],
+    ws: Workspace,
+    y: Vec<f64>,
+    dphi: Vec<f64>,
+    t0: f64,
+}
 
-    let model = &ctx.model;
-    let cols = crate::pipeline::trial::match_markers(ctx, &result.name, trial).map(|m| m.columns).unwrap_or_default();
-    let mut ws = Workspace::new(model);
-    let mut y = vec![0.0; model.ny()];
-    let mut dphi = vec![0.0; ctx.proxy.terms.len()];
-    let t0 = trial.times.first().copied().unwrap_or(0.0);
-    for (f, p) in result.proxies.iter().enumerate() {
-        let t = trial.times.get(f).copied().unwrap_or(f as f64 / trial.rate_hz.max(1e-9)) - t0;
-        ctx.proxy.apply(p, &mut y, &mut dphi);
-        cpu::forward(model, &y, &mut ws);
-        let s = &result.stats[f];
+impl<'a> TrialWriter<'a> {
+    /// Starts `out` (as its temporary file) for `trial` (named `name`), solved with `ctx`.
+    pub fn create(out: &Path, ctx: &'a Context, name: &str, trial: &'a MarkerTrial) -> Result<Self, McapOutError> {
+        let tmp = partial_path(out);
+        let file = tmp.display().to_string();
+        let io = |source| McapOutError::Io { file: file.clone(), source };
+        let mc = |source| McapOutError::Mcap { file: file.clone(), source };
+        let f = std::fs::File::create(&tmp).map_err(io)?;
+        let opts = mcap::WriteOptions::new()
+            .compression(Some(mcap::Compression::Zstd))
+            .profile("")
+            .library(format!("smocap {}", env!("CARGO_PKG_VERSION")));
+        let w = opts.create(BufWriter::new(f)).map_err(mc);
+        let model = &ctx.model;
+        let mut tw = TrialWriter {
+            ctx,
+            trial,
+            cols: crate::pipeline::trial::match_markers(ctx, name, trial).map(|m| m.columns).unwrap_or_default(),
+            w: None,
+            tmp: tmp.clone(),
+            out: out.to_path_buf(),
+            ch: [0; 5],
+            ws: Workspace::new(model),
+            y: vec![0.0; model.ny()],
+            dphi: vec![0.0; ctx.proxy.terms.len()],
+            t0: trial.times.first().copied().unwrap_or(0.0),
+        };
+        // From here on, dropping `tw` removes the temporary file.
+        tw.w = Some(w?);
+        let w = tw.w.as_mut().expect("just set");
+        let meta: BTreeMap<String, String> = [
+            ("length_unit", "m"),
+            ("angle_unit", "rad"),
+            ("frame", "world: the model's frame (the marker data rotated into it)"),
+            ("up", &ctx.up.map_or("none".into(), |u| format!("[{}, {}, {}]", u.x + 0.0, u.y + 0.0, u.z + 0.0))),
+            ("log_time", "ns since the trial's first sample time"),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+        let mut channel = |name: &str, topic: &str, schema: &Value| -> Result<u16, McapOutError> {
+            let id = w.add_schema(name, "jsonschema", schema.to_string().as_bytes()).map_err(mc)?;
+            w.add_channel(id, topic, "json", &meta).map_err(mc)
+        };
+        tw.ch = [
+            channel("smocap.State", "/smocap/state", &schemas::state())?,
+            channel("smocap.Residuals", "/smocap/residuals", &schemas::residuals())?,
+            channel("smocap.SolverStats", "/smocap/stats", &schemas::stats())?,
+            channel("foxglove.FrameTransforms", "/tf", &schemas::frame_transforms())?,
+            channel("foxglove.SceneUpdate", "/scene", &schemas::scene_update())?,
+        ];
+        Ok(tw)
+    }
+
+    fn mcap_err(&self, source: mcap::McapError) -> McapOutError {
+        McapOutError::Mcap { file: self.tmp.display().to_string(), source }
+    }
+
+    /// Writes one solved frame: a message on each channel, log time = the frame's time.
+    pub fn frame(&mut self, fr: &SolvedFrame) -> Result<(), McapOutError> {
+        let (ctx, trial) = (self.ctx, self.trial);
+        let model = &ctx.model;
+        let f = fr.index;
+        let p = &fr.proxies;
+        let t = trial.times.get(f).copied().unwrap_or(f as f64 / trial.rate_hz.max(1e-9)) - self.t0;
+        ctx.proxy.apply(p, &mut self.y, &mut self.dphi);
+        cpu::forward(model, &self.y, &mut self.ws);
+        let (y, ws) = (&self.y, &self.ws);
+        let s = &fr.stats;
         let ts = stamp(t);
         let q: serde_json::Map<String, Value> =
             model.coordinates.iter().enumerate().map(|(j, c)| (c.name.clone(), json!(y[j]))).collect();
@@ -114,7 +152,7 @@ pub fn write_trial(
         let (mut spheres, mut sq, mut n) = (Vec::new(), 0.0, 0usize);
         for (m, mk) in model.markers.iter().enumerate() {
             let mp = &ws.markers[3 * m..3 * m + 3];
-            let obs = cols.get(m).copied().flatten().and_then(|c| trial.position(f, c));
+            let obs = self.cols.get(m).copied().flatten().and_then(|c| trial.position(f, c));
             let err = obs.map(|o| [o[0] - mp[0], o[1] - mp[1], o[2] - mp[2]]);
             if let Some(e) = err {
                 sq += e.iter().map(|v| v * v).sum::<f64>();
@@ -131,8 +169,7 @@ pub fn write_trial(
         let stats = json!({
             "time": t, "frame": f, "iterations": s.iterations, "accepted_steps": s.accepted,
             "energy": finite(s.energy), "rmse": finite(s.rmse_m), "markers_used": s.markers_used,
-            "solve_s": result.frame_seconds.get(f).copied().unwrap_or(0.0),
-            "status": format!("{:?}", s.status), "bridged": result.bridged.binary_search(&f).is_ok(),
+            "solve_s": fr.seconds, "status": format!("{:?}", s.status), "bridged": fr.bridged,
         });
         let transforms: Vec<Value> = model
             .bodies
@@ -161,6 +198,7 @@ pub fn write_trial(
                 "points": bones, "color": {"r": 0.8, "g": 0.8, "b": 0.8, "a": 1.0}, "colors": [], "indices": []}],
             "triangles": [], "texts": [], "models": []}]});
         let ns = (t.max(0.0) * 1e9).round() as u64;
+        let [ch_state, ch_res, ch_stats, ch_tf, ch_scene] = self.ch;
         for (ch, msg) in [
             (ch_state, state),
             (ch_res, residuals),
@@ -169,28 +207,52 @@ pub fn write_trial(
             (ch_scene, scene),
         ] {
             let header = MessageHeader { channel_id: ch, sequence: f as u32, log_time: ns, publish_time: ns };
-            w.write_to_known_channel(&header, msg.to_string().as_bytes()).map_err(mc)?;
+            let w = self.w.as_mut().expect("present until finished");
+            w.write_to_known_channel(&header, msg.to_string().as_bytes()).map_err(|e| self.mcap_err(e))?;
+        }
+        Ok(())
+    }
+
+    /// Writes the `smocap.run` metadata (`run`), attaches `settings_json` and `scaled_model`
+    /// (OpenSim `.osim` text), writes the summary, syncs, and renames the file to its final name.
+    pub fn finish(mut self, run: &RunInfo, settings_json: &str, scaled_model: Option<&str>) -> Result<(), McapOutError> {
+        let file = self.tmp.display().to_string();
+        let io = |source| McapOutError::Io { file: file.clone(), source };
+        let mc = |source| McapOutError::Mcap { file: file.clone(), source };
+        let mut w = self.w.take().expect("present until finished");
+        // On an error below, `w` and then `self` drop, which removes the temporary file.
+        w.write_metadata(&Metadata { name: "smocap.run".into(), metadata: run.clone() }).map_err(mc)?;
+        let attach = |w: &mut mcap::Writer<_>, name: &str, media: &str, data: &[u8]| {
+            w.attach(&mcap::Attachment {
+                log_time: 0,
+                create_time: 0,
+                name: name.into(),
+                media_type: media.into(),
+                data: std::borrow::Cow::Borrowed(data),
+            })
+        };
+        attach(&mut w, "settings.json", "application/json", settings_json.as_bytes()).map_err(mc)?;
+        if let Some(m) = scaled_model {
+            attach(&mut w, "scaled_model.osim", "application/xml", m.as_bytes()).map_err(mc)?;
+        }
+        w.finish().map_err(mc)?;
+        let f = w.into_inner().into_inner().map_err(|e| io(e.into_error()))?;
+        f.sync_all().map_err(io)?;
+        drop(f);
+        std::fs::rename(&self.tmp, &self.out)
+            .map_err(|source| McapOutError::Io { file: self.out.display().to_string(), source })?;
+        self.tmp = PathBuf::new();
+        Ok(())
+    }
+}
+
+impl Drop for TrialWriter<'_> {
+    fn drop(&mut self) {
+        drop(self.w.take());
+        if !self.tmp.as_os_str().is_empty() {
+            let _ = std::fs::remove_file(&self.tmp);
         }
     }
-    w.write_metadata(&Metadata { name: "smocap.run".into(), metadata: run.clone() }).map_err(mc)?;
-    let attach = |w: &mut mcap::Writer<_>, name: &str, media: &str, data: &[u8]| {
-        w.attach(&mcap::Attachment {
-            log_time: 0,
-            create_time: 0,
-            name: name.into(),
-            media_type: media.into(),
-            data: std::borrow::Cow::Borrowed(data),
-        })
-    };
-    attach(&mut w, "settings.json", "application/json", settings_json.as_bytes()).map_err(mc)?;
-    if let Some(m) = scaled_model {
-        attach(&mut w, "scaled_model.osim", "application/xml", m.as_bytes()).map_err(mc)?;
-    }
-    w.finish().map_err(mc)?;
-    let f = w.into_inner().into_inner().map_err(|e| io(e.into_error()))?;
-    f.sync_all().map_err(io)?;
-    drop(f);
-    std::fs::rename(&tmp, out).map_err(|source| McapOutError::Io { file: out.display().to_string(), source })
 }
 
 fn finite(x: f64) -> Value {

@@ -13,6 +13,7 @@ pub mod progress;
 pub mod schemas;
 pub mod shard;
 pub mod synthetic;
+pub mod trial_job;
 
 pub use convert::{convert, ConvertOptions, ConvertSummary, TrialOutcome};
 

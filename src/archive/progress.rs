@@ -18,7 +18,7 @@ pub struct Progress {
     pub trials_failed: AtomicU64,
     /// Frames expected (from file headers), corrected as trials finish.
     pub frames_total: AtomicU64,
-    /// Frames solved; the solver adds one per frame ([`crate::pipeline::solve_trial_counted`]).
+    /// Frames solved; the trial writer adds one per frame written (`archive::trial_job`).
     pub frames_done: AtomicU64,
     expected: Mutex<HashMap<String, u64>>,
 }

@@ -44,6 +44,18 @@ impl MarkerTrial {
         self.times.len()
     }
 
+    /// Overrides the sampling rate (Hz): frame times become `t₀ + (n − n₀) / rate_hz` from the
+    /// first frame's time `t₀` and number `n₀` (so skipped frame numbers keep their gap).
+    pub fn set_rate(&mut self, rate_hz: f64) {
+        let t0 = self.times.first().copied().unwrap_or(0.0);
+        let n0 = self.frame_numbers.first().copied().unwrap_or(0);
+        for (i, t) in self.times.iter_mut().enumerate() {
+            let n = self.frame_numbers.get(i).map_or(i as i64, |n| n - n0);
+            *t = t0 + n as f64 / rate_hz;
+        }
+        self.rate_hz = rate_hz;
+    }
+
     /// Number of markers (labels).
     pub fn n_markers(&self) -> usize {
         self.labels.len()

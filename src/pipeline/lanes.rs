@@ -8,6 +8,7 @@
 //! start, on the CPU, at the beginning of a segment); lanes whose segment ends take the next
 //! segment from the queue. The solver never knows which [`BatchBackend`] evaluated.
 
+use crate::io::MarkerTrial;
 use crate::kinematics::assembly::{fold_tracking_reference, Evaluator, FrameProblem};
 use crate::kinematics::backend::{BackendError, BatchBackend, EnergyEval, FrameModel};
 use crate::solve::init::multi_start;
@@ -15,14 +16,13 @@ use crate::solve::trqp::{FrameIteration, Next};
 use crate::solve::{make_qp, FrameSolver, FrameStats, FrameStatus, SolverSettings, WarmStart};
 use rayon::prelude::*;
 use std::collections::VecDeque;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 /// What every frame of the trial shares.
 #[derive(Clone, Copy, Debug)]
 pub struct TrialInputs<'a> {
-    /// Observations, frame-major (`frame · 3M + 3·marker + axis`, m), NaN gaps.
-    pub observed: &'a [f64],
+    /// Observations, read frame by frame as lanes reach them.
+    pub observed: FrameObservations<'a>,
     pub marker_weights: &'a [f64],
     /// Tracking reference `y_ref` for the scales (the pose part is reset to each warm start).
     pub reference: &'a [f64],
@@ -37,8 +37,27 @@ pub struct TrialInputs<'a> {
     pub neutral: &'a [f64],
     /// The calibration's proxies: one more start for a segment's first frame.
     pub calibrated: &'a [f64],
-    /// Counts solved frames as they finish (progress display), when given.
-    pub frames_done: Option<&'a AtomicU64>,
+}
+
+/// A trial's observations in model-marker order, read one frame at a time (so that a trial's
+/// observations are never copied whole).
+#[derive(Clone, Copy, Debug)]
+pub struct FrameObservations<'a> {
+    pub trial: &'a MarkerTrial,
+    /// Trial column of each model marker.
+    pub map: &'a [Option<usize>],
+}
+
+impl FrameObservations<'_> {
+    /// Frame `f` as `3·marker + axis` (m), NaN where unobserved; as [`super::trial::observations`].
+    pub fn fill(&self, f: usize, out: &mut [f64]) {
+        out.fill(f64::NAN);
+        for (m, col) in self.map.iter().enumerate() {
+            if let Some(p) = col.and_then(|c| self.trial.position(f, c)) {
+                out[3 * m..3 * m + 3].copy_from_slice(&p);
+            }
+        }
+    }
 }
 
 /// One solved frame: proxies, statistics, seconds from its start to its end (wall).
@@ -58,12 +77,14 @@ struct Lane<'e> {
     started: Instant,
     y_warm: Vec<f64>,
     dphi: Vec<f64>,
+    /// The current frame's observations.
+    obs: Vec<f64>,
 }
 
 impl<'e> Lane<'e> {
-    fn frame_problem<'a>(&'a self, inp: &TrialInputs<'a>, stride: usize) -> FrameProblem<'a> {
+    fn frame_problem<'a>(&'a self, inp: &TrialInputs<'a>) -> FrameProblem<'a> {
         FrameProblem {
-            observed: &inp.observed[self.frame * stride..(self.frame + 1) * stride],
+            observed: &self.obs,
             marker_weights: inp.marker_weights,
             tracking_ref: &self.reference,
             tracking_weights: inp.tracking_weights_all,
@@ -71,10 +92,11 @@ impl<'e> Lane<'e> {
     }
 
     /// Prepares `self.frame`: warm start, pose prior, cold start at a segment's beginning.
-    fn start_frame(&mut self, inp: &TrialInputs<'_>, stride: usize) {
+    fn start_frame(&mut self, inp: &TrialInputs<'_>) {
         let eval = self.solver.eval;
         let nq = eval.model.nq();
         self.started = Instant::now();
+        inp.observed.fill(self.frame, &mut self.obs);
         match (&self.prev, &self.prev2, self.solver.settings.warm_start) {
             (Some(p1), Some(p2), WarmStart::Extrapolate) => {
                 for (k, v) in self.p.iter_mut().enumerate() {
@@ -97,7 +119,7 @@ impl<'e> Lane<'e> {
         );
         if self.prev.is_none() {
             let frame = FrameProblem {
-                observed: &inp.observed[self.frame * stride..(self.frame + 1) * stride],
+                observed: &self.obs,
                 marker_weights: inp.marker_weights,
                 tracking_ref: &self.reference,
                 tracking_weights: inp.tracking_weights_all,
@@ -112,19 +134,20 @@ impl<'e> Lane<'e> {
 }
 
 /// Solves the frames of `segments` (ranges of frame indices of one trial) with `lanes` lanes,
-/// evaluating through `backend`. Returns one result per frame of the trial (frames in no
-/// segment are `None`). Runs on the current rayon pool.
-pub fn run_lanes(
+/// evaluating through `backend`, handing each frame to `done` (with its index) as soon as it is
+/// solved: in frame order within a segment, segments interleaved when several lanes run. An error
+/// from `done` stops the run and is returned. Runs on the current rayon pool.
+pub fn run_lanes<E: From<BackendError>>(
     eval: &Evaluator<'_>,
     settings: &SolverSettings,
     inp: &TrialInputs<'_>,
     segments: &[(usize, usize)],
     lanes: usize,
     backend: &mut dyn BatchBackend,
-) -> Result<Vec<Option<FrameResult>>, BackendError> {
+    done: &mut dyn FnMut(usize, FrameResult) -> Result<(), E>,
+) -> Result<(), E> {
     let (np, nm, ny) = (eval.proxy.np(), eval.model.markers.len(), eval.model.ny());
     let stride = 3 * nm;
-    let n_frames = inp.observed.len() / stride.max(1);
     let mut queue: VecDeque<(usize, usize)> = segments.iter().copied().filter(|(a, b)| b > a).collect();
     let n_lanes = lanes.max(1).min(queue.len().max(1));
     let mut lanes: Vec<Lane<'_>> = (0..n_lanes)
@@ -141,9 +164,9 @@ pub fn run_lanes(
             started: Instant::now(),
             y_warm: vec![0.0; ny],
             dphi: vec![0.0; eval.proxy.terms.len()],
+            obs: vec![f64::NAN; stride],
         })
         .collect();
-    let mut results: Vec<Option<FrameResult>> = vec![None; n_frames];
     let mut models: Vec<FrameModel> = (0..n_lanes).map(|_| FrameModel::new(np, nm)).collect();
     let mut energies = vec![EnergyEval::default(); n_lanes];
     let mut px: Vec<f64> = Vec::with_capacity(n_lanes * np);
@@ -152,10 +175,7 @@ pub fn run_lanes(
         for lane in lanes.iter_mut() {
             let Next::Done(stats) = lane.next else { continue };
             if lane.it.take().is_some() {
-                results[lane.frame] = Some((lane.p.clone(), stats, lane.started.elapsed().as_secs_f64()));
-                if let Some(c) = inp.frames_done {
-                    c.fetch_add(1, Ordering::Relaxed);
-                }
+                done(lane.frame, (lane.p.clone(), stats, lane.started.elapsed().as_secs_f64()))?;
                 if stats.status != FrameStatus::TooFewMarkers {
                     let old = lane.prev2.take();
                     lane.prev2 = lane.prev.take();
@@ -174,7 +194,7 @@ pub fn run_lanes(
                 }
             }
         }
-        lanes.par_iter_mut().filter(|l| l.seg.is_some() && l.it.is_none()).for_each(|l| l.start_frame(inp, stride));
+        lanes.par_iter_mut().filter(|l| l.seg.is_some() && l.it.is_none()).for_each(|l| l.start_frame(inp));
         if lanes.iter().all(|l| l.seg.is_none()) {
             break;
         }
@@ -184,7 +204,6 @@ pub fn run_lanes(
             &lanes,
             |n| matches!(n, Next::Linearize),
             inp,
-            stride,
             &mut px,
             |l| &l.p,
             |f, p| backend.linearize(f, p, &mut models[..f.len()]),
@@ -203,7 +222,6 @@ pub fn run_lanes(
             &lanes,
             |n| matches!(n, Next::Energy),
             inp,
-            stride,
             &mut px,
             |l| l.solver.trial(),
             |f, p| backend.energy(f, p, &mut energies[..f.len()]),
@@ -216,7 +234,7 @@ pub fn run_lanes(
             });
         }
     }
-    Ok(results)
+    Ok(())
 }
 
 /// Gathers the lanes that need `what` into one batch and evaluates it; returns its size.
@@ -224,7 +242,6 @@ fn batch<'l>(
     lanes: &'l [Lane<'_>],
     what: impl Fn(&Next) -> bool,
     inp: &TrialInputs<'l>,
-    stride: usize,
     px: &mut Vec<f64>,
     point: impl Fn(&'l Lane<'_>) -> &'l [f64],
     mut eval: impl FnMut(&[FrameProblem<'_>], &[f64]) -> Result<(), BackendError>,
@@ -232,7 +249,7 @@ fn batch<'l>(
     px.clear();
     let mut frames = Vec::new();
     for l in lanes.iter().filter(|l| what(&l.next)) {
-        frames.push(l.frame_problem(inp, stride));
+        frames.push(l.frame_problem(inp));
         px.extend_from_slice(point(l));
     }
     if !frames.is_empty() {

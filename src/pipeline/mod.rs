@@ -11,8 +11,10 @@ pub mod lanes;
 pub mod matching;
 pub mod report;
 pub mod stats;
+pub mod stream;
 pub mod subject;
 pub mod trial;
 
 pub use context::{Context, ContextError};
-pub use trial::{calibrate_subject, solve_trial, solve_trial_counted, solve_trial_with, TrialError, TrialResult};
+pub use stream::{solve_trial, solve_trial_streaming, solve_trial_with, SolvedFrame, StreamedTrial};
+pub use trial::{calibrate_subject, TrialError, TrialResult};

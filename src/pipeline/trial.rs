@@ -1,22 +1,21 @@
-//! Solving one trial: match markers, calibrate the subject (from a static trial or frames of the
-//! motion), then solve every frame warm-started from the previous one. Long trials are cut into
-//! segments solved in parallel, each cold-started. Frames with too few markers are reported and
-//! bridged from their neighbours.
+//! One trial's inputs and results: matching its markers, its observations and gaps, calibrating
+//! the subject (from a static trial or frames of the motion). The frames themselves are solved in
+//! [`super::stream`]: warm-started from the previous one, long trials cut into segments solved in
+//! parallel (each cold-started), frames with too few markers reported and bridged from their
+//! neighbours.
 
-use super::lanes::{run_lanes, TrialInputs};
 use super::matching::{match_names, MarkerMatch, MatchError};
 use super::stats::{GapStats, MarkerGaps};
 use super::Context;
 use crate::io::MarkerTrial;
 use crate::kinematics::assembly::FrameProblem;
-use crate::kinematics::backend::{BackendError, BatchBackend, CpuBackend};
-use crate::model::proxy::ProxyKind;
+use crate::kinematics::backend::BackendError;
 use crate::solve::calibrate::track;
-use crate::solve::init::wrap_angle;
 use crate::solve::placement::place_markers;
-use crate::solve::{calibrate, make_qp, Calibration, FrameSolver, FrameStats, FrameStatus};
-use std::sync::atomic::AtomicU64;
-use std::time::Instant;
+use crate::solve::{calibrate, make_qp, Calibration, FrameSolver, FrameStats};
+
+/// An error from a frame sink (e.g. writing the frame failed).
+pub type SinkError = Box<dyn std::error::Error + Send + Sync>;
 
 /// Why a trial could not be solved.
 #[derive(Debug, thiserror::Error)]
@@ -31,6 +30,8 @@ pub enum TrialError {
     NothingToCalibrate { trial: String, min: usize },
     #[error("trial '{trial}': evaluation backend failed: {source}")]
     Backend { trial: String, source: BackendError },
+    #[error("trial '{trial}': frame {frame}: {source}")]
+    Output { trial: String, frame: usize, source: SinkError },
 }
 
 /// Result of one trial.
@@ -176,180 +177,10 @@ pub fn calibrate_subject(ctx: &Context, trials: &[(&str, &MarkerTrial)]) -> Resu
     Ok(cal)
 }
 
-fn no_match(ctx: &Context, name: &str, trial: &MarkerTrial) -> TrialError {
+pub(crate) fn no_match(ctx: &Context, name: &str, trial: &MarkerTrial) -> TrialError {
     TrialError::NoMarkerMatch {
         trial: name.into(),
         trial_labels: trial.labels.join(", "),
         model_labels: ctx.model.markers.iter().map(|m| m.name.clone()).collect::<Vec<_>>().join(", "),
     }
-}
-
-/// Solves every frame of `trial` for a subject calibrated as `calibration` on the CPU backend,
-/// with `threads` worker threads and as many lanes.
-pub fn solve_trial(
-    ctx: &Context,
-    name: &str,
-    trial: &MarkerTrial,
-    calibration: &Calibration,
-    threads: usize,
-) -> Result<TrialResult, TrialError> {
-    solve_trial_with(ctx, name, trial, calibration, threads, threads, None)
-}
-
-/// As [`solve_trial`], adding one to `frames_done` as each frame is solved (for progress
-/// displays; bridged frames count too).
-pub fn solve_trial_counted(
-    ctx: &Context,
-    name: &str,
-    trial: &MarkerTrial,
-    calibration: &Calibration,
-    threads: usize,
-    frames_done: &AtomicU64,
-) -> Result<TrialResult, TrialError> {
-    solve(ctx, name, trial, calibration, threads, threads, None, Some(frames_done))
-}
-
-/// Solves every frame of `trial` with the lane scheduler ([`super::lanes`]): the trial is cut
-/// into at most `lanes` segments of at least 100 frames, each cold-started and walked by one
-/// lane; evaluations go to `backend` (the CPU backend when `None`), the QPs to a pool of
-/// `threads` threads.
-pub fn solve_trial_with(
-    ctx: &Context,
-    name: &str,
-    trial: &MarkerTrial,
-    calibration: &Calibration,
-    threads: usize,
-    lanes: usize,
-    backend: Option<&mut (dyn BatchBackend + '_)>,
-) -> Result<TrialResult, TrialError> {
-    solve(ctx, name, trial, calibration, threads, lanes, backend, None)
-}
-
-#[allow(clippy::too_many_arguments)]
-fn solve(
-    ctx: &Context,
-    name: &str,
-    trial: &MarkerTrial,
-    calibration: &Calibration,
-    threads: usize,
-    lanes: usize,
-    backend: Option<&mut (dyn BatchBackend + '_)>,
-    frames_done: Option<&AtomicU64>,
-) -> Result<TrialResult, TrialError> {
-    let start = Instant::now();
-    let nm = ctx.model.markers.len();
-    let matched = match_markers(ctx, name, trial)?;
-    let map = &matched.columns;
-    if map.iter().all(Option::is_none) {
-        return Err(no_match(ctx, name, trial));
-    }
-    if trial.n_frames() == 0 {
-        return Err(TrialError::Empty { trial: name.into() });
-    }
-    let obs = observations(trial, map);
-    let settings = &ctx.settings;
-    let eval = ctx.evaluator();
-    let ny = ctx.model.ny();
-    let np = ctx.proxy.np();
-    debug_assert_eq!(obs.len(), trial.n_frames() * 3 * nm);
-
-    // Tracking: scales toward the calibration, coordinates weakly toward the warm start.
-    let y_cal = ctx.proxy.state(&calibration.proxies);
-    let mut track_w = vec![0.0; ny];
-    for t in &ctx.proxy.terms {
-        let kind = ctx.proxy.proxies[t.proxy].kind;
-        track_w[t.y_index] =
-            if kind == ProxyKind::Scale { settings.scale_tracking_weight } else { settings.pose_prior_weight };
-    }
-    // Coordinate targets fold into the pose prior's reference (same objective up to a constant).
-    let (coord_ref, coord_w) = ctx.coordinate_tracking();
-    let track_w_all: Vec<f64> = track_w.iter().zip(&coord_w).map(|(a, b)| a + b).collect();
-
-    let mut neutral = ctx.proxy.default_proxies();
-    for (k, px) in ctx.proxy.proxies.iter().enumerate() {
-        if px.kind == ProxyKind::Scale {
-            neutral[k] = calibration.proxies[k];
-        }
-    }
-    // Segments, one lane each at a time.
-    let n = trial.n_frames();
-    let threads = threads.max(1);
-    let lanes = lanes.max(1);
-    let segments = lanes.min(n.div_ceil(100)).max(1);
-    let bounds: Vec<(usize, usize)> = (0..segments).map(|i| (i * n / segments, (i + 1) * n / segments)).collect();
-    let inputs = TrialInputs {
-        observed: &obs,
-        marker_weights: &ctx.marker_weights,
-        reference: &y_cal,
-        tracking_weights: &track_w,
-        coordinate_targets: &coord_ref,
-        coordinate_weights: &coord_w,
-        tracking_weights_all: &track_w_all,
-        neutral: &neutral,
-        calibrated: &calibration.proxies,
-        frames_done,
-    };
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().ok();
-    let run = || match backend {
-        Some(b) => run_lanes(&eval, settings, &inputs, &bounds, lanes, b),
-        None => {
-            let mut cpu = CpuBackend::new(eval.clone());
-            run_lanes(&eval, settings, &inputs, &bounds, lanes, &mut cpu)
-        }
-    };
-    let solved = match &pool {
-        Some(pool) => pool.install(run),
-        None => run(),
-    }
-    .map_err(|e| TrialError::Backend { trial: name.into(), source: e })?;
-    let pieces = solved.into_iter().map(|r| r.expect("every frame lies in one segment"));
-    let mut proxies = Vec::with_capacity(n);
-    let mut stats = Vec::with_capacity(n);
-    let mut frame_seconds = Vec::with_capacity(n);
-    for (p, s, t) in pieces {
-        proxies.push(p);
-        stats.push(s);
-        frame_seconds.push(t);
-    }
-    // Bridge frames without enough markers from the nearest solved neighbours.
-    let solved: Vec<usize> = (0..n).filter(|&f| stats[f].status != FrameStatus::TooFewMarkers).collect();
-    let bridged: Vec<usize> = (0..n).filter(|&f| stats[f].status == FrameStatus::TooFewMarkers).collect();
-    for &f in &bridged {
-        let before = solved.iter().rev().find(|&&g| g < f);
-        let after = solved.iter().find(|&&g| g > f);
-        proxies[f] = match (before, after) {
-            (Some(&g0), Some(&g1)) => {
-                let w = (f - g0) as f64 / (g1 - g0) as f64;
-                (0..np)
-                    .map(|k| {
-                        let (a, b) = (proxies[g0][k], proxies[g1][k]);
-                        // Unbounded angles (a root heading) go the short way round.
-                        let px = &ctx.proxy.proxies[k];
-                        let unbounded = px.range.0 == f64::NEG_INFINITY && px.range.1 == f64::INFINITY;
-                        let d = if px.kind == ProxyKind::Rotation && unbounded { wrap_angle(b - a) } else { b - a };
-                        a + w * d
-                    })
-                    .collect()
-            }
-            (Some(&g), None) | (None, Some(&g)) => proxies[g].clone(),
-            (None, None) => calibration.proxies.clone(),
-        };
-    }
-    let names: Vec<&str> = ctx.model.markers.iter().map(|m| m.name.as_str()).collect();
-    let renamed = matched.renamed(&names, &trial.labels).into_iter().map(|(a, b)| (a.into(), b.into())).collect();
-    let gaps = gap_stats(ctx, trial, map, bridged.len());
-    Ok(TrialResult {
-        name: name.into(),
-        proxies,
-        stats,
-        frame_seconds,
-        calibration: calibration.clone(),
-        bridged,
-        unmatched_model: matched.unmatched_model.clone(),
-        unmatched_trial: matched.unmatched_trial.clone(),
-        renamed,
-        gaps,
-        wall_seconds: start.elapsed().as_secs_f64(),
-        threads,
-    })
 }

@@ -118,4 +118,21 @@ impl SolverSettings {
     pub fn from_table(table: &toml::Table) -> Result<SolverSettings, String> {
         toml::Value::Table(table.clone()).try_into().map_err(|e: toml::de::Error| format!("[solver]: {e}"))
     }
+
+    /// These settings with the fields in `table` (same keys and values as a profile's `[solver]`
+    /// table) replaced; an unknown key or a bad value is an error that names the valid keys.
+    pub fn with_overrides(&self, table: &toml::Table) -> Result<SolverSettings, String> {
+        let mut merged = toml::Table::try_from(self).map_err(|e| e.to_string())?;
+        for (k, v) in table {
+            if !merged.contains_key(k) {
+                let valid: Vec<&str> = merged.keys().map(String::as_str).collect();
+                return Err(format!("unknown solver setting `{k}` (valid: {})", valid.join(", ")));
+            }
+            merged.insert(k.clone(), v.clone());
+        }
+        toml::Value::Table(merged).try_into().map_err(|e: toml::de::Error| {
+            let keys: Vec<&str> = table.keys().map(String::as_str).collect();
+            format!("solver settings {}: {}", keys.join(", "), e.to_string().trim())
+        })
+    }
 }

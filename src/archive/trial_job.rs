@@ -1,0 +1,89 @@
+//! One trial of `smocap convert`: read it, solve it frame by frame and stream each frame into its
+//! MCAP file as it is solved ([`super::mcap_out::TrialWriter`]); what is kept is the trial's input
+//! and three numbers per frame for the summary.
+
+use super::config::Dataset;
+use super::mcap_out::{RunInfo, TrialWriter};
+use crate::io::MarkerTrial;
+use crate::pipeline::convention::InputOptions;
+use crate::pipeline::stats::P50P90;
+use crate::pipeline::subject::read_trial;
+use crate::pipeline::trial::SinkError;
+use crate::pipeline::{solve_trial_streaming, Context, SolvedFrame};
+use crate::solve::Calibration;
+use std::path::Path;
+
+/// A subject ready to solve its trials.
+pub struct Calibrated {
+    /// The context the trials are read with (units, up axis).
+    pub base: Context,
+    /// The context with the markers placed, when marker placement moved them.
+    pub placed: Option<Context>,
+    pub calibration: Calibration,
+    pub settings_json: String,
+    pub scaled_model: Option<String>,
+}
+
+impl Calibrated {
+    /// The context the trials are solved with.
+    pub fn ctx(&self) -> &Context {
+        self.placed.as_ref().unwrap_or(&self.base)
+    }
+}
+
+/// Reads a trial for dataset `d` into the model's conventions, with the dataset's rate override.
+pub fn read_for(d: &Dataset, ctx: &Context, path: &Path, input: &InputOptions) -> Result<MarkerTrial, String> {
+    let (mut t, _) = read_trial(ctx, path, input).map_err(|e| e.to_string())?;
+    if let Some(r) = d.rate {
+        t.set_rate(r);
+    }
+    Ok(t)
+}
+
+/// What one converted trial yields for the summary.
+pub struct Solved {
+    pub frames: usize,
+    pub solve_s: f64,
+    pub ms_per_frame: P50P90,
+    pub iterations: P50P90,
+    pub rmse_mm: Option<P50P90>,
+}
+
+/// Solves `trial` and streams it to `out` (via its `.partial` file); `run` is the `smocap.run`
+/// metadata; `frames_done` counts frames as they are written (progress display). On any error the temporary file is removed and no file has the final name.
+pub fn solve_and_write(
+    out: &Path,
+    name: &str,
+    trial: &MarkerTrial,
+    cal: &Calibrated,
+    run: &RunInfo,
+    frames_done: Option<&std::sync::atomic::AtomicU64>,
+) -> Result<Solved, String> {
+    let ctx = cal.ctx();
+    if let Some(parent) = out.parent() {
+        std::fs::create_dir_all(parent).map_err(|e| format!("{}: {e}", parent.display()))?;
+    }
+    let mut writer = TrialWriter::create(out, ctx, name, trial).map_err(|e| e.to_string())?;
+    let (mut ms, mut it, mut rmse, mut secs) = (Vec::new(), Vec::new(), Vec::new(), 0.0);
+    let mut sink = |f: SolvedFrame| -> Result<(), SinkError> {
+        writer.frame(&f)?;
+        if let Some(c) = frames_done {
+            c.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        }
+        secs += f.seconds;
+        ms.push(f.seconds * 1e3);
+        it.push(f.stats.iterations as f64);
+        rmse.push(f.stats.rmse_m * 1e3);
+        Ok(())
+    };
+    solve_trial_streaming(ctx, name, trial, &cal.calibration, 1, 1, None, &mut sink).map_err(|e| e.to_string())?;
+    writer.finish(run, &cal.settings_json, cal.scaled_model.as_deref()).map_err(|e| e.to_string())?;
+    rmse.retain(|x: &f64| x.is_finite());
+    Ok(Solved {
+        frames: ms.len(),
+        solve_s: secs,
+        ms_per_frame: P50P90::of(&ms),
+        iterations: P50P90::of(&it),
+        rmse_mm: (!rmse.is_empty()).then(|| P50P90::of(&rmse)),
+    })
+}

@@ -1,0 +1,314 @@
+//! Solving one trial frame by frame: each frame goes to a sink as soon as it and the frames before
+//! it are solved, so a writer can stream results out without holding the trial's results.
+//!
+//! Frames leave in frame order. Frames with too few markers wait until the next solved frame
+//! (they are bridged between their solved neighbours, see [`super::trial`]); with several lanes,
+//! frames of later segments wait for the earlier segments. With one lane (what `smocap convert`
+//! uses), what is held beyond the input trial is the current gap of unsolved frames.
+
+use super::lanes::{run_lanes, FrameObservations, FrameResult, TrialInputs};
+use super::stats::GapStats;
+use super::trial::{gap_stats, match_markers, no_match, SinkError, TrialError, TrialResult};
+use super::Context;
+use crate::io::MarkerTrial;
+use crate::kinematics::backend::{BackendError, BatchBackend, CpuBackend};
+use crate::model::proxy::ProxyKind;
+use crate::solve::init::wrap_angle;
+use crate::solve::{Calibration, FrameStats, FrameStatus};
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+/// Where solved frames go.
+pub type FrameSink<'a> = dyn FnMut(SolvedFrame) -> Result<(), SinkError> + Send + 'a;
+
+/// One solved frame.
+#[derive(Clone, Debug)]
+pub struct SolvedFrame {
+    /// Frame index in the trial (0-based).
+    pub index: usize,
+    pub proxies: Vec<f64>,
+    /// Statistics (a bridged frame has status `TooFewMarkers`).
+    pub stats: FrameStats,
+    /// Solve time (s, wall), as [`super::TrialResult::frame_seconds`].
+    pub seconds: f64,
+    /// Bridged from its neighbours because too few markers were observed.
+    pub bridged: bool,
+}
+
+/// What is known of a trial once all its frames went to the sink.
+#[derive(Clone, Debug)]
+pub struct StreamedTrial {
+    pub name: String,
+    pub frames: usize,
+    /// Frames bridged from neighbours.
+    pub bridged: usize,
+    pub unmatched_model: Vec<String>,
+    pub unmatched_trial: Vec<String>,
+    /// `(file label, model marker)` for markers matched other than exactly.
+    pub renamed: Vec<(String, String)>,
+    pub gaps: GapStats,
+    /// Wall time of all frames (s), calibration excluded, sink included.
+    pub wall_seconds: f64,
+    pub threads: usize,
+}
+
+enum Stop {
+    Backend(BackendError),
+    Sink(usize, SinkError),
+}
+
+impl From<BackendError> for Stop {
+    fn from(e: BackendError) -> Stop {
+        Stop::Backend(e)
+    }
+}
+
+/// Puts frames in order and bridges frames with too few markers before handing them on.
+struct Orderer<'a> {
+    ctx: &'a Context,
+    calibrated: &'a [f64],
+    next: usize,
+    /// Finished ahead of `next` (several lanes).
+    early: BTreeMap<usize, FrameResult>,
+    /// The last solved frame handed on.
+    last: Option<(usize, Vec<f64>)>,
+    /// Frames with too few markers waiting for the next solved frame.
+    gap: Vec<(usize, FrameResult)>,
+    bridged: usize,
+}
+
+impl Orderer<'_> {
+    fn push(
+        &mut self,
+        f: usize,
+        r: FrameResult,
+        sink: &mut FrameSink<'_>,
+    ) -> Result<(), Stop> {
+        self.early.insert(f, r);
+        while let Some(r) = self.early.remove(&self.next) {
+            let f = self.next;
+            self.next += 1;
+            if r.1.status == FrameStatus::TooFewMarkers {
+                self.gap.push((f, r));
+                continue;
+            }
+            self.flush(Some((f, r.0.as_slice())), sink)?;
+            self.last = Some((f, r.0.clone()));
+            let (proxies, stats, seconds) = r;
+            sink(SolvedFrame { index: f, proxies, stats, seconds, bridged: false }).map_err(|e| Stop::Sink(f, e))?;
+        }
+        Ok(())
+    }
+
+    /// Bridges the waiting frames between the last solved frame and `after`, and hands them on.
+    fn flush(
+        &mut self,
+        after: Option<(usize, &[f64])>,
+        sink: &mut FrameSink<'_>,
+    ) -> Result<(), Stop> {
+        let before = self.last.as_ref().map(|(g, p)| (*g, p.as_slice()));
+        for (f, (_, stats, seconds)) in std::mem::take(&mut self.gap) {
+            let proxies = bridge(self.ctx, f, before, after, self.calibrated);
+            self.bridged += 1;
+            sink(SolvedFrame { index: f, proxies, stats, seconds, bridged: true }).map_err(|e| Stop::Sink(f, e))?;
+        }
+        Ok(())
+    }
+}
+
+/// Proxies of frame `f` interpolated between the solved frames `before` and `after` (the nearer
+/// one's when only one exists; the calibration's when neither does).
+fn bridge(
+    ctx: &Context,
+    f: usize,
+    before: Option<(usize, &[f64])>,
+    after: Option<(usize, &[f64])>,
+    calibrated: &[f64],
+) -> Vec<f64> {
+    match (before, after) {
+        (Some((g0, a)), Some((g1, b))) => {
+            let w = (f - g0) as f64 / (g1 - g0) as f64;
+            (0..a.len())
+                .map(|k| {
+                    // Unbounded angles (a root heading) go the short way round.
+                    let px = &ctx.proxy.proxies[k];
+                    let unbounded = px.range.0 == f64::NEG_INFINITY && px.range.1 == f64::INFINITY;
+                    let d = b[k] - a[k];
+                    let d = if px.kind == ProxyKind::Rotation && unbounded { wrap_angle(d) } else { d };
+                    a[k] + w * d
+                })
+                .collect()
+        }
+        (Some((_, p)), None) | (None, Some((_, p))) => p.to_vec(),
+        (None, None) => calibrated.to_vec(),
+    }
+}
+
+/// Solves every frame of `trial` like [`super::solve_trial_with`], handing each frame to `sink`
+/// in frame order as soon as it is known. An error from `sink` stops the solve
+/// ([`TrialError::Output`]).
+#[allow(clippy::too_many_arguments)]
+pub fn solve_trial_streaming(
+    ctx: &Context,
+    name: &str,
+    trial: &MarkerTrial,
+    calibration: &Calibration,
+    threads: usize,
+    lanes: usize,
+    backend: Option<&mut (dyn BatchBackend + '_)>,
+    sink: &mut FrameSink<'_>,
+) -> Result<StreamedTrial, TrialError> {
+    let start = Instant::now();
+    let matched = match_markers(ctx, name, trial)?;
+    let map = &matched.columns;
+    if map.iter().all(Option::is_none) {
+        return Err(no_match(ctx, name, trial));
+    }
+    if trial.n_frames() == 0 {
+        return Err(TrialError::Empty { trial: name.into() });
+    }
+    let obs = FrameObservations { trial, map };
+    let settings = &ctx.settings;
+    let eval = ctx.evaluator();
+    let ny = ctx.model.ny();
+
+    // Tracking: scales toward the calibration, coordinates weakly toward the warm start.
+    let y_cal = ctx.proxy.state(&calibration.proxies);
+    let mut track_w = vec![0.0; ny];
+    for t in &ctx.proxy.terms {
+        let kind = ctx.proxy.proxies[t.proxy].kind;
+        track_w[t.y_index] =
+            if kind == ProxyKind::Scale { settings.scale_tracking_weight } else { settings.pose_prior_weight };
+    }
+    // Coordinate targets fold into the pose prior's reference (same objective up to a constant).
+    let (coord_ref, coord_w) = ctx.coordinate_tracking();
+    let track_w_all: Vec<f64> = track_w.iter().zip(&coord_w).map(|(a, b)| a + b).collect();
+
+    let mut neutral = ctx.proxy.default_proxies();
+    for (k, px) in ctx.proxy.proxies.iter().enumerate() {
+        if px.kind == ProxyKind::Scale {
+            neutral[k] = calibration.proxies[k];
+        }
+    }
+    // Segments, one lane each at a time.
+    let n = trial.n_frames();
+    let threads = threads.max(1);
+    let lanes = lanes.max(1);
+    let segments = lanes.min(n.div_ceil(100)).max(1);
+    let bounds: Vec<(usize, usize)> = (0..segments).map(|i| (i * n / segments, (i + 1) * n / segments)).collect();
+    let inputs = TrialInputs {
+        observed: obs,
+        marker_weights: &ctx.marker_weights,
+        reference: &y_cal,
+        tracking_weights: &track_w,
+        coordinate_targets: &coord_ref,
+        coordinate_weights: &coord_w,
+        tracking_weights_all: &track_w_all,
+        neutral: &neutral,
+        calibrated: &calibration.proxies,
+    };
+    let mut order = Orderer {
+        ctx,
+        calibrated: &calibration.proxies,
+        next: 0,
+        early: BTreeMap::new(),
+        last: None,
+        gap: Vec::new(),
+        bridged: 0,
+    };
+    // One thread and one lane run on the caller's thread: no pool to start, and no waiting on
+    // one during which a caller's rayon worker would take up other work (e.g. another trial).
+    let pool = (threads > 1 || lanes > 1)
+        .then(|| rayon::ThreadPoolBuilder::new().num_threads(threads).build().ok())
+        .flatten();
+    let run = || -> Result<(), Stop> {
+        let mut done = |f: usize, r: FrameResult| order.push(f, r, sink);
+        match backend {
+            Some(b) => run_lanes(&eval, settings, &inputs, &bounds, lanes, b, &mut done)?,
+            None => {
+                let mut cpu = CpuBackend::new(eval.clone());
+                run_lanes(&eval, settings, &inputs, &bounds, lanes, &mut cpu, &mut done)?
+            }
+        }
+        debug_assert!(order.early.is_empty() && order.next == n, "every frame lies in one segment");
+        order.flush(None, sink)
+    };
+    match &pool {
+        Some(pool) => pool.install(run),
+        None => run(),
+    }
+    .map_err(|e| match e {
+        Stop::Backend(source) => TrialError::Backend { trial: name.into(), source },
+        Stop::Sink(frame, source) => TrialError::Output { trial: name.into(), frame, source },
+    })?;
+    let names: Vec<&str> = ctx.model.markers.iter().map(|m| m.name.as_str()).collect();
+    let renamed = matched.renamed(&names, &trial.labels).into_iter().map(|(a, b)| (a.into(), b.into())).collect();
+    let bridged = order.bridged;
+    Ok(StreamedTrial {
+        name: name.into(),
+        frames: n,
+        bridged,
+        unmatched_model: matched.unmatched_model.clone(),
+        unmatched_trial: matched.unmatched_trial.clone(),
+        renamed,
+        gaps: gap_stats(ctx, trial, map, bridged),
+        wall_seconds: start.elapsed().as_secs_f64(),
+        threads,
+    })
+}
+
+/// Solves every frame of `trial` for a subject calibrated as `calibration` on the CPU backend,
+/// with `threads` worker threads and as many lanes.
+pub fn solve_trial(
+    ctx: &Context,
+    name: &str,
+    trial: &MarkerTrial,
+    calibration: &Calibration,
+    threads: usize,
+) -> Result<TrialResult, TrialError> {
+    solve_trial_with(ctx, name, trial, calibration, threads, threads, None)
+}
+
+/// Solves every frame of `trial` with the lane scheduler ([`super::lanes`]): the trial is cut
+/// into at most `lanes` segments of at least 100 frames, each cold-started and walked by one
+/// lane; evaluations go to `backend` (the CPU backend when `None`), the QPs to a pool of
+/// `threads` threads. Collects what [`solve_trial_streaming`] hands on frame by frame.
+pub fn solve_trial_with(
+    ctx: &Context,
+    name: &str,
+    trial: &MarkerTrial,
+    calibration: &Calibration,
+    threads: usize,
+    lanes: usize,
+    backend: Option<&mut (dyn BatchBackend + '_)>,
+) -> Result<TrialResult, TrialError> {
+    let n = trial.n_frames();
+    let mut proxies = Vec::with_capacity(n);
+    let mut stats = Vec::with_capacity(n);
+    let mut frame_seconds = Vec::with_capacity(n);
+    let mut bridged = Vec::new();
+    let mut sink = |f: SolvedFrame| -> Result<(), SinkError> {
+        if f.bridged {
+            bridged.push(f.index);
+        }
+        proxies.push(f.proxies);
+        stats.push(f.stats);
+        frame_seconds.push(f.seconds);
+        Ok(())
+    };
+    let s = solve_trial_streaming(ctx, name, trial, calibration, threads, lanes, backend, &mut sink)?;
+    Ok(TrialResult {
+        name: s.name,
+        proxies,
+        stats,
+        frame_seconds,
+        calibration: calibration.clone(),
+        bridged,
+        unmatched_model: s.unmatched_model,
+        unmatched_trial: s.unmatched_trial,
+        renamed: s.renamed,
+        gaps: s.gaps,
+        wall_seconds: s.wall_seconds,
+        threads: s.threads,
+    })
+}
