@@ -25,8 +25,13 @@ use std::path::{Path, PathBuf};
 pub enum McapOutError {
     #[error("{file}: {source}")]
     Io { file: String, source: std::io::Error },
-    #[error("{file}: {source}")]
+    #[error("{file}: {source}{}", cause(source))]
     Mcap { file: String, source: mcap::McapError },
+}
+
+/// The underlying error of an MCAP error (e.g. "no space left on device"), as ": <cause>".
+fn cause(e: &mcap::McapError) -> String {
+    std::error::Error::source(e).map(|c| format!(": {c}")).unwrap_or_default()
 }
 
 /// What the `smocap.run` metadata record holds (all strings).
@@ -215,7 +220,12 @@ impl<'a> TrialWriter<'a> {
 
     /// Writes the `smocap.run` metadata (`run`), attaches `settings_json` and `scaled_model`
     /// (OpenSim `.osim` text), writes the summary, syncs, and renames the file to its final name.
-    pub fn finish(mut self, run: &RunInfo, settings_json: &str, scaled_model: Option<&str>) -> Result<(), McapOutError> {
+    pub fn finish(
+        mut self,
+        run: &RunInfo,
+        settings_json: &str,
+        scaled_model: Option<&str>,
+    ) -> Result<(), McapOutError> {
         let file = self.tmp.display().to_string();
         let io = |source| McapOutError::Io { file: file.clone(), source };
         let mc = |source| McapOutError::Mcap { file: file.clone(), source };

@@ -78,12 +78,7 @@ struct Orderer<'a> {
 }
 
 impl Orderer<'_> {
-    fn push(
-        &mut self,
-        f: usize,
-        r: FrameResult,
-        sink: &mut FrameSink<'_>,
-    ) -> Result<(), Stop> {
+    fn push(&mut self, f: usize, r: FrameResult, sink: &mut FrameSink<'_>) -> Result<(), Stop> {
         self.early.insert(f, r);
         while let Some(r) = self.early.remove(&self.next) {
             let f = self.next;
@@ -101,11 +96,7 @@ impl Orderer<'_> {
     }
 
     /// Bridges the waiting frames between the last solved frame and `after`, and hands them on.
-    fn flush(
-        &mut self,
-        after: Option<(usize, &[f64])>,
-        sink: &mut FrameSink<'_>,
-    ) -> Result<(), Stop> {
+    fn flush(&mut self, after: Option<(usize, &[f64])>, sink: &mut FrameSink<'_>) -> Result<(), Stop> {
         let before = self.last.as_ref().map(|(g, p)| (*g, p.as_slice()));
         for (f, (_, stats, seconds)) in std::mem::take(&mut self.gap) {
             let proxies = bridge(self.ctx, f, before, after, self.calibrated);
@@ -218,9 +209,8 @@ pub fn solve_trial_streaming(
     };
     // One thread and one lane run on the caller's thread: no pool to start, and no waiting on
     // one during which a caller's rayon worker would take up other work (e.g. another trial).
-    let pool = (threads > 1 || lanes > 1)
-        .then(|| rayon::ThreadPoolBuilder::new().num_threads(threads).build().ok())
-        .flatten();
+    let pool =
+        (threads > 1 || lanes > 1).then(|| rayon::ThreadPoolBuilder::new().num_threads(threads).build().ok()).flatten();
     let run = || -> Result<(), Stop> {
         let mut done = |f: usize, r: FrameResult| order.push(f, r, sink);
         match backend {
