@@ -52,6 +52,8 @@ pub struct TrialRecord {
     pub time_offset: f64,
     /// The `scaled_model.osim` attachment, when the file has one.
     pub scaled_model: Option<String>,
+    /// Where the converted model came from (`smocap.run` → `model`).
+    pub model_source: Option<String>,
 }
 
 /// Reads the frames of `path` (a file written by `smocap convert`).
@@ -61,13 +63,17 @@ pub fn read_trial_record(path: &Path) -> Result<TrialRecord, ExportError> {
     let mc = |source| ExportError::Mcap { file: file.clone(), source };
     let bad = |what: String| ExportError::Content { file: file.clone(), what };
     let summary = mcap::Summary::read(&buf).map_err(mc)?;
-    let (mut time_offset, mut scaled_model) = (0.0, None);
+    let (mut time_offset, mut scaled_model, mut model_source) = (0.0, None, None);
     if let Some(summary) = &summary {
         for idx in &summary.metadata_indexes {
             let m = mcap::read::metadata(&buf, idx).map_err(mc)?;
-            if let Some(v) = m.metadata.get("first_sample_time_s").filter(|_| m.name == "smocap.run") {
+            if m.name != "smocap.run" {
+                continue;
+            }
+            if let Some(v) = m.metadata.get("first_sample_time_s") {
                 time_offset = v.parse().map_err(|_| bad(format!("first_sample_time_s '{v}' is not a number")))?;
             }
+            model_source = m.metadata.get("model").cloned();
         }
         if let Some(idx) = summary.attachment_indexes.iter().find(|a| a.name == "scaled_model.osim") {
             let a = mcap::read::attachment(&buf, idx).map_err(mc)?;
@@ -110,13 +116,27 @@ pub fn read_trial_record(path: &Path) -> Result<TrialRecord, ExportError> {
         .into_iter()
         .map(|(f, state)| Frame { state, rmse_m: rmse.get(&f).copied().flatten(), status: status.remove(&f).flatten() })
         .collect();
-    Ok(TrialRecord { frames, time_offset, scaled_model })
+    Ok(TrialRecord { frames, time_offset, scaled_model, model_source })
 }
 
-/// The model of a record: its attached scaled model (coordinate order and motion types are the
-/// converted model's).
-pub fn attached_model(rec: &TrialRecord, file: &Path) -> Result<Model, ExportError> {
+/// The model a record was converted with (its coordinate order and motion types): the shipped
+/// model; for an OpenSim model, the attached scaled model (the source rewritten with scales);
+/// an MJCF model is read from its recorded path (an `.osim` generated from it may order a
+/// joint's coordinates differently).
+pub fn conversion_model(rec: &TrialRecord, file: &Path) -> Result<Model, ExportError> {
     let bad = |what: String| ExportError::Content { file: file.display().to_string(), what };
+    let source = rec.model_source.as_deref().unwrap_or("");
+    if source.starts_with("shipped:") {
+        return Ok(crate::pipeline::Context::shipped().map_err(|e| bad(format!("the shipped model: {e}")))?.model);
+    }
+    if !source.to_ascii_lowercase().ends_with(".osim") {
+        let path = Path::new(source);
+        if source.is_empty() || !path.is_file() {
+            return Err(bad(format!("its model '{source}' (MJCF) is not readable here")));
+        }
+        let (model, _) = crate::io::mjcf::read_mjcf(path).map_err(|e| bad(e.to_string()))?;
+        return Ok(model);
+    }
     let text = rec.scaled_model.as_deref().ok_or_else(|| bad("no scaled_model.osim attachment".into()))?;
     let (model, _) = crate::io::osim::parse_osim(text, "scaled_model.osim")
         .map_err(|e| bad(format!("its scaled_model.osim: {e}")))?;

@@ -123,7 +123,7 @@ impl Display {
             let trials = multi.add(ProgressBar::new(0));
             trials.set_style(style("trials [{bar:32.cyan/blue}] {pos}/{len} {msg} ({elapsed})"));
             let frames = multi.add(ProgressBar::new(0));
-            frames.set_style(style("frames [{bar:32.green/blue}] {human_pos}/{human_len} {per_sec} eta {eta}"));
+            frames.set_style(style("frames [{bar:32.green/blue}] {human_pos}/{human_len} {msg} eta {eta}"));
             (multi, trials, frames)
         });
         let (stop, rx) = channel::<()>();
@@ -141,7 +141,7 @@ impl Display {
                 }
                 let s = p.snapshot();
                 match &b {
-                    Some((t, f)) => update_bars(t, f, &s),
+                    Some((t, f)) => update_bars(t, f, &s, start.elapsed().as_secs_f64()),
                     None => eprintln!("progress: {}", status_line(&s, start.elapsed().as_secs_f64())),
                 }
             })
@@ -168,7 +168,7 @@ impl Display {
         }
         let s = self.progress.snapshot();
         if let Some((_, t, f)) = &self.bars {
-            update_bars(t, f, &s);
+            update_bars(t, f, &s, self.start.elapsed().as_secs_f64());
             t.finish();
             f.finish();
         }
@@ -178,10 +178,11 @@ impl Display {
     }
 }
 
-fn update_bars(trials: &ProgressBar, frames: &ProgressBar, s: &Snapshot) {
+fn update_bars(trials: &ProgressBar, frames: &ProgressBar, s: &Snapshot, elapsed_s: f64) {
     trials.set_length(s.trials_total);
     trials.set_position(s.trials_done);
     trials.set_message(if s.trials_failed > 0 { format!("{} failed", s.trials_failed) } else { String::new() });
     frames.set_length(s.frames_total.max(s.frames_done));
     frames.set_position(s.frames_done);
+    frames.set_message(format!("{:.0} frames/s", s.frames_done as f64 / elapsed_s.max(1e-9)));
 }

@@ -1,6 +1,6 @@
 //! `smocap export`: a converted trial's state channel as an OpenSim motion and/or CSV.
 
-use crate::archive::export::{attached_model, read_trial_record, write_csv, write_mot};
+use crate::archive::export::{conversion_model, read_trial_record, write_csv, write_mot};
 use clap::Args;
 use std::path::PathBuf;
 
@@ -17,7 +17,8 @@ pub struct ExportArgs {
     #[arg(long)]
     pub csv: Option<PathBuf>,
     /// The model (.osim or MJCF) that gives coordinate order and which are in degrees; by
-    /// default the file's attached scaled model.
+    /// default the conversion's (the shipped model, the attached scaled `.osim`, or the MJCF file
+    /// at its recorded path).
     #[arg(long)]
     pub model: Option<PathBuf>,
 }
@@ -26,7 +27,7 @@ pub fn run(a: ExportArgs) -> anyhow::Result<u8> {
     let rec = read_trial_record(&a.file)?;
     let model = match &a.model {
         Some(p) => Some(super::load_context(Some(p.as_path()), None)?.model),
-        None => match attached_model(&rec, &a.file) {
+        None => match conversion_model(&rec, &a.file) {
             Ok(m) => Some(m),
             Err(e) if a.mot.is_some() => {
                 return Err(anyhow::Error::new(e).context("--mot needs the model (try --model)"))
