@@ -84,3 +84,31 @@ fn synthetic_subjects_keep_their_morphology_between_static_and_motion() {
     }
     assert!(s.motion.positions.iter().all(|v| v.is_finite()));
 }
+
+#[test]
+fn stagewise_scaling_reproduces_opensims_scale_tool_on_gait2354() {
+    let dir = std::path::Path::new("../shared/datasets/gait2354_subject01");
+    if !dir.is_dir() {
+        eprintln!("note: {} absent, skipped", dir.display());
+        return;
+    }
+    use smocap::pipeline::subject::{prepare_subject, read_trial, SubjectFiles};
+    let setup_path = dir.join("subject01_Setup_Scale.xml");
+    let sub = prepare_subject(&SubjectFiles {
+        model: Some(dir.join("gait2354_simbody.osim")),
+        markerset: Some(dir.join("gait2354_Scale_MarkerSet.xml")),
+        scale_setup: Some(setup_path.clone()),
+        static_trial: Some(dir.join("subject01_static.trc")),
+        ..Default::default()
+    })
+    .unwrap();
+    let (st, _) = read_trial(&sub.ctx, sub.static_path.as_deref().unwrap(), &Default::default()).unwrap();
+    let setup = smocap::io::osim::read_scale_setup(&setup_path).unwrap();
+    let scale = measure(&sub.ctx, &st, &setup.measurements, &setup.manual_scales);
+    // The factors OpenSim 4.6's ScaleTool applied (reference subject01_scaleSet_applied.xml).
+    for (body, want) in [("pelvis", 1.02458), ("torso", 1.07972), ("talus_r", 1.11398), ("calcn_l", 1.02708), ("femur_r", 1.14724)] {
+        let b = sub.ctx.model.body_index(body).unwrap();
+        let got = scale.body_factors[b][0].unwrap();
+        assert!((got - want).abs() < 2e-3, "{body}: {got} vs OpenSim {want}");
+    }
+}

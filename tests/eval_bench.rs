@@ -65,7 +65,7 @@ fn bench_prints_the_table_writes_the_report_and_an_svg_figure() {
     assert_eq!(tiny["name"], "tiny");
     assert_eq!(tiny["frames"], 20);
     assert_eq!(tiny["trials"], 1);
-    assert!(tiny["fps"].as_f64().unwrap() > 0.0);
+    assert!(tiny["fps"].as_f64().unwrap() > 0.0 && tiny["wall_fps"].as_f64().unwrap() > 0.0);
     for k in ["ms_per_frame", "iterations", "rmse_mm"] {
         let (p50, p90) = (tiny[k]["p50"].as_f64().unwrap(), tiny[k]["p90"].as_f64().unwrap());
         assert!(p50.is_finite() && p90 >= p50, "{k}: {p50} {p90}");
@@ -80,7 +80,7 @@ fn bench_prints_the_table_writes_the_report_and_an_svg_figure() {
     let text = std::fs::read_to_string(&svg).unwrap();
     assert!(text.trim_start().starts_with("<svg") && text.trim_end().ends_with("</svg>"), "not an SVG");
     assert!(text.contains("per-frame solve time") && text.contains("per-frame marker RMSE"));
-    assert!(text.contains(">tiny<"), "dataset label missing from the figure");
+    assert!(text.contains("\ntiny\n"), "dataset label missing from the figure");
     std::fs::remove_dir_all(&dir).ok();
 }
 
