@@ -75,8 +75,7 @@ fn synthetic_subjects_keep_their_morphology_between_static_and_motion() {
     assert_eq!(s.static_trial.n_frames(), 30);
     assert_eq!(s.motion.n_frames(), 40);
     assert_eq!(s.truth_q.len(), 40);
-    let scales: Vec<usize> =
-        (0..ctx.proxy.np()).filter(|&k| ctx.proxy.proxies[k].kind == ProxyKind::Scale).collect();
+    let scales: Vec<usize> = (0..ctx.proxy.np()).filter(|&k| ctx.proxy.proxies[k].kind == ProxyKind::Scale).collect();
     for &k in &scales {
         let v = s.truth_proxies[0][k];
         assert!((0.9 - 1e-12..=1.1 + 1e-12).contains(&v));
@@ -106,7 +105,9 @@ fn stagewise_scaling_reproduces_opensims_scale_tool_on_gait2354() {
     let setup = smocap::io::osim::read_scale_setup(&setup_path).unwrap();
     let scale = measure(&sub.ctx, &st, &setup.measurements, &setup.manual_scales);
     // The factors OpenSim 4.6's ScaleTool applied (reference subject01_scaleSet_applied.xml).
-    for (body, want) in [("pelvis", 1.02458), ("torso", 1.07972), ("talus_r", 1.11398), ("calcn_l", 1.02708), ("femur_r", 1.14724)] {
+    for (body, want) in
+        [("pelvis", 1.02458), ("torso", 1.07972), ("talus_r", 1.11398), ("calcn_l", 1.02708), ("femur_r", 1.14724)]
+    {
         let b = sub.ctx.model.body_index(body).unwrap();
         let got = scale.body_factors[b][0].unwrap();
         assert!((got - want).abs() < 2e-3, "{body}: {got} vs OpenSim {want}");

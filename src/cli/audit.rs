@@ -46,7 +46,8 @@ pub fn run(a: AuditArgs) -> anyhow::Result<u8> {
     }
     print!("{}", report.table());
     if let Some(p) = &a.report_json {
-        std::fs::write(p, serde_json::to_string_pretty(&report)?).with_context(|| format!("writing {}", p.display()))?;
+        std::fs::write(p, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("writing {}", p.display()))?;
     }
     Ok(if report.failed.is_empty() { 0 } else { super::EXIT_SOME_FAILED })
 }

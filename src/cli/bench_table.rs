@@ -54,7 +54,8 @@ pub fn run(a: BenchTableArgs) -> anyhow::Result<u8> {
     print!("{}", report.table());
     println!("timed: {}", report.timed);
     if let Some(p) = &a.report_json {
-        std::fs::write(p, serde_json::to_string_pretty(&report)?).with_context(|| format!("writing {}", p.display()))?;
+        std::fs::write(p, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("writing {}", p.display()))?;
     }
     write_figure(&report, &a.figure)?;
     eprintln!("figure: {}", a.figure.display());

@@ -89,8 +89,10 @@ pub struct AuditReport {
 
 /// Runs the synthetic part on `n` subjects of the shipped model, in parallel over subjects.
 pub fn audit_synthetic(ctx: &Context, n: usize, seed: u64, spec: &SubjectSpec) -> AuditReport {
-    let results: Vec<Result<SubjectAudit, String>> =
-        (0..n).into_par_iter().map(|i| audit_subject(ctx, spec, seed, i).map_err(|e| format!("subject {i}: {e}"))).collect();
+    let results: Vec<Result<SubjectAudit, String>> = (0..n)
+        .into_par_iter()
+        .map(|i| audit_subject(ctx, spec, seed, i).map_err(|e| format!("subject {i}: {e}")))
+        .collect();
     let (mut subjects, mut failed) = (Vec::new(), Vec::new());
     for r in results {
         match r {
@@ -111,7 +113,8 @@ pub fn audit_synthetic(ctx: &Context, n: usize, seed: u64, spec: &SubjectSpec) -
     };
     let mean = (!subjects.is_empty()).then(|| {
         let avg = |g: fn(&SubjectAudit) -> MethodErrors| {
-            let m = |f: fn(&MethodErrors) -> f64| subjects.iter().map(|s| f(&g(s))).sum::<f64>() / subjects.len() as f64;
+            let m =
+                |f: fn(&MethodErrors) -> f64| subjects.iter().map(|s| f(&g(s))).sum::<f64>() / subjects.len() as f64;
             MethodErrors {
                 pose_deg: m(|e| e.pose_deg),
                 knee_deg: m(|e| e.knee_deg),
@@ -160,14 +163,23 @@ pub fn segment_lengths(ctx: &Context) -> Vec<f64> {
     let model = &ctx.model;
     let nq = model.nq();
     let extent = |b: usize| {
-        let joints = model.bodies.iter().filter(|c| c.parent == Some(b)).map(|c| c.joint.parent_offset.translation.vector.norm());
+        let joints = model
+            .bodies
+            .iter()
+            .filter(|c| c.parent == Some(b))
+            .map(|c| c.joint.parent_offset.translation.vector.norm());
         let markers = model.markers.iter().filter(|m| m.body == b).map(|m| m.offset.norm());
         joints.chain(markers).fold(0.0, f64::max)
     };
     (0..ctx.proxy.np())
         .map(|k| {
-            let mut bodies: Vec<usize> =
-                ctx.proxy.terms.iter().filter(|t| t.proxy == k && t.y_index >= nq).map(|t| (t.y_index - nq) / 3).collect();
+            let mut bodies: Vec<usize> = ctx
+                .proxy
+                .terms
+                .iter()
+                .filter(|t| t.proxy == k && t.y_index >= nq)
+                .map(|t| (t.y_index - nq) / 3)
+                .collect();
             bodies.dedup();
             bodies.into_iter().map(extent).sum()
         })
@@ -228,7 +240,15 @@ impl AuditReport {
         let row = |name: String, j: &MethodErrors, g: &MethodErrors| {
             format!(
                 "{:>7}  {:>10.2}/{:<10.2} {:>10.2}/{:<10.2} {:>10.2}/{:<10.2} {:>10.2}/{:<10.2}\n",
-                name, j.pose_deg, g.pose_deg, j.knee_deg, g.knee_deg, j.scale_mm, g.scale_mm, j.marker_rmse_mm, g.marker_rmse_mm
+                name,
+                j.pose_deg,
+                g.pose_deg,
+                j.knee_deg,
+                g.knee_deg,
+                j.scale_mm,
+                g.scale_mm,
+                j.marker_rmse_mm,
+                g.marker_rmse_mm
             )
         };
         for a in &self.subjects {

@@ -155,7 +155,8 @@ pub fn opensim_rows(dir: &Path) -> Vec<Row> {
             if !f.file_name().is_some_and(|n| n.to_string_lossy().ends_with("_summary.json")) {
                 continue;
             }
-            let Some(s) = std::fs::read_to_string(&f).ok().and_then(|t| serde_json::from_str::<OpenSimSummary>(&t).ok())
+            let Some(s) =
+                std::fs::read_to_string(&f).ok().and_then(|t| serde_json::from_str::<OpenSimSummary>(&t).ok())
             else {
                 continue;
             };
@@ -217,18 +218,8 @@ impl DatasetBench {
 }
 
 /// The table's header line.
-pub const HEADER: [&str; 10] = [
-    "dataset",
-    "source",
-    "frames",
-    "FPS",
-    "ms/frame p50",
-    "p90",
-    "iter p50",
-    "p90",
-    "RMSE mm p50",
-    "p90",
-];
+pub const HEADER: [&str; 10] =
+    ["dataset", "source", "frames", "FPS", "ms/frame p50", "p90", "iter p50", "p90", "RMSE mm p50", "p90"];
 
 impl BenchReport {
     /// The table: smocap's rows, then OpenSim's and the published ones; skipped datasets and
@@ -237,7 +228,16 @@ impl BenchReport {
         let f = |v: Option<f64>, d: usize| v.map_or("-".to_string(), |x| format!("{x:.d$}"));
         let mut s = format!(
             "{:<22} {:<19} {:>7} {:>8} {:>12} {:>6} {:>8} {:>4} {:>11} {:>6}\n",
-            HEADER[0], HEADER[1], HEADER[2], HEADER[3], HEADER[4], HEADER[5], HEADER[6], HEADER[7], HEADER[8], HEADER[9]
+            HEADER[0],
+            HEADER[1],
+            HEADER[2],
+            HEADER[3],
+            HEADER[4],
+            HEADER[5],
+            HEADER[6],
+            HEADER[7],
+            HEADER[8],
+            HEADER[9]
         );
         let rows = self.datasets.iter().filter_map(DatasetBench::row).chain(self.opensim.iter().cloned());
         for r in rows.chain(self.published.iter().cloned()) {

@@ -78,7 +78,8 @@ pub fn measure(
         }
         (n > 0).then(|| sum.map(|s| s / n as f64))
     };
-    let dist = |a: [f64; 3], b: [f64; 3]| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();
+    let dist =
+        |a: [f64; 3], b: [f64; 3]| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();
     let model_pos = |m: usize| [ws.markers[3 * m], ws.markers[3 * m + 1], ws.markers[3 * m + 2]];
     let mut body_factors = vec![[None; 3]; model.nb()];
     for meas in measurements {

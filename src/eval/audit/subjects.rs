@@ -116,7 +116,8 @@ pub fn subject(ctx: &Context, spec: &SubjectSpec, seed: u64, index: usize) -> Sy
     // Static: the default pose at the subject's morphology, swaying by ≤ 0.01 rad.
     let p_motion0 = truth_proxies.first().cloned().unwrap_or_else(|| proxy.default_proxies());
     let default = proxy.default_proxies();
-    let sway: Vec<(f64, f64)> = (0..proxy.np()).map(|_| (rng.random_range(0.1..0.5), rng.random_range(0.0..TAU))).collect();
+    let sway: Vec<(f64, f64)> =
+        (0..proxy.np()).map(|_| (rng.random_range(0.1..0.5), rng.random_range(0.0..TAU))).collect();
     let static_p: Vec<Vec<f64>> = (0..spec.static_frames)
         .map(|f| {
             let t = f as f64 / 100.0;

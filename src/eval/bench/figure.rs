@@ -30,7 +30,8 @@ struct Panel<'a> {
 pub fn write_figure(report: &BenchReport, path: &Path) -> Result<(), FigureError> {
     let err = |e: &dyn std::fmt::Display| FigureError { path: path.display().to_string(), message: e.to_string() };
     let runs: Vec<&DatasetBench> = report.datasets.iter().filter(|d| !d.frame_ms.is_empty()).collect();
-    let opensim = |name: &str, f: fn(&Row) -> Option<f64>| report.opensim.iter().find(|r| r.dataset == name).and_then(f);
+    let opensim =
+        |name: &str, f: fn(&Row) -> Option<f64>| report.opensim.iter().find(|r| r.dataset == name).and_then(f);
     let range = |f: fn(&Row) -> Option<f64>| {
         let v: Vec<f64> = report.published.iter().filter_map(f).collect();
         let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
@@ -65,7 +66,11 @@ type DrawResult = Result<(), DrawingAreaErrorKind<std::io::Error>>;
 
 fn draw_panel(area: &DrawingArea<SVGBackend<'_>, Shift>, p: &Panel<'_>) -> DrawResult {
     let tf = |v: f64| if p.log { v.max(1e-6).log10() } else { v };
-    let mut all: Vec<f64> = p.datasets.iter().flat_map(|(_, v, o)| [percentile(v, 0.02), percentile(v, 0.98)].into_iter().chain(*o)).collect();
+    let mut all: Vec<f64> = p
+        .datasets
+        .iter()
+        .flat_map(|(_, v, o)| [percentile(v, 0.02), percentile(v, 0.98)].into_iter().chain(*o))
+        .collect();
     if let Some((lo, hi)) = p.published {
         all.extend([lo, hi]);
     }
@@ -117,7 +122,10 @@ fn draw_panel(area: &DrawingArea<SVGBackend<'_>, Shift>, p: &Panel<'_>) -> DrawR
             chart.draw_series(std::iter::once(PathElement::new(vec![a, b], blue.stroke_width(2))))?;
         }
         for y in [q[0], q[4]] {
-            chart.draw_series(std::iter::once(PathElement::new(vec![(x - 0.1, y), (x + 0.1, y)], blue.stroke_width(1))))?;
+            chart.draw_series(std::iter::once(PathElement::new(
+                vec![(x - 0.1, y), (x + 0.1, y)],
+                blue.stroke_width(1),
+            )))?;
         }
     }
     chart
