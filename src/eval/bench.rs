@@ -8,7 +8,7 @@
 //! What is timed ([`TIMED`]): per frame, the frame's trust-region solve in its lane
 //! ([`crate::pipeline::TrialResult::frame_seconds`]: warm start, linearisations, QPs, energy
 //! evaluations; with one lane, nothing else); FPS is the dataset's frames over the sum of those
-//! per-frame times (the published FPS is likewise ≈ 1000 / median ms). `wall_fps` in the report
+//! per-frame times, 1000 / mean ms (the published FPS equals 1000 / median ms). `wall_fps` in the report
 //! is frames over the summed wall time of [`solve_trial_with`] (adding marker matching, packing the
 //! observations in memory, the thread pool and backend of each trial, gap bridging). Not timed:
 //! reading files, loading and setting up the model, calibration, choosing the evaluation backend.
