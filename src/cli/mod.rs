@@ -3,7 +3,9 @@
 //! Exit codes: 0 all ok; 1 an error stopped the command (bad input, I/O); 2 usage error;
 //! 3 the command ran but some trials failed (see the report).
 
+mod audit;
 mod bench;
+mod bench_table;
 mod convert;
 mod demo;
 mod export;
@@ -38,6 +40,10 @@ pub enum Command {
     Markers(markers::MarkersArgs),
     /// Batched evaluation throughput (frame-evaluations/s) of the shipped model per batch size.
     BenchBatch(bench::BenchArgs),
+    /// Throughput and convergence per dataset (datasets.toml) beside the published and OpenSim figures.
+    Bench(bench_table::BenchTableArgs),
+    /// Leakage audit: the joint solve against a stage-wise scale-then-IK baseline.
+    Audit(audit::AuditArgs),
     /// Convert whole archives (datasets.toml) to one MCAP file per trial, each subject calibrated once.
     Convert(convert::ConvertArgs),
     /// What a converted MCAP file holds: channels, message counts, run metadata, attachments.
@@ -58,6 +64,8 @@ pub fn main() -> ExitCode {
         Command::Solve(a) => solve::run(a),
         Command::Markers(a) => markers::run(a),
         Command::BenchBatch(a) => bench::run(a),
+        Command::Bench(a) => bench_table::run(a),
+        Command::Audit(a) => audit::run(a),
         Command::Convert(a) => convert::run(a),
         Command::Inspect(a) => inspect::run(a),
         Command::MergeReports(a) => merge::run(a),

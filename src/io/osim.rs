@@ -61,7 +61,7 @@ pub use func::simm_spline;
 pub use ik_setup::{parse_ik_setup, read_ik_setup, IkSetup};
 pub use markers::{parse_marker_set, read_marker_set};
 pub use scale::{scale_inertia, scale_osim, MassScaling};
-pub use scale_setup::{parse_scale_setup, read_scale_setup, ScaleSetup};
+pub use scale_setup::{parse_scale_setup, read_scale_setup, Measurement, ScaleSetup};
 
 use crate::model::{Body, Coordinate, CoordinateCoupling, Function, Marker, Model, ModelError, Motion, MotionKind};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};

@@ -9,7 +9,9 @@
 //!   and the subject mass, for information.
 //!
 //! smocap estimates the factors of those groups from the markers (jointly with the pose), rather
-//! than from marker-pair distances or manual values; the groups are what is kept.
+//! than from marker-pair distances or manual values; the groups are what is kept. The measurements
+//! themselves (marker pairs and the body axes they scale) and the manual factors are kept too, for
+//! the stage-wise baseline of the leakage audit (`smocap audit`), which scales as OpenSim does.
 
 use super::ik_setup::{read_task, IkSetup};
 use super::xml::{child, elements, set_objects, Ctx};
@@ -33,6 +35,21 @@ pub struct ScaleSetup {
     pub static_file: Option<PathBuf>,
     /// Subject mass (kg), when given.
     pub mass_kg: Option<f64>,
+    /// The applied measurements, in the `ModelScaler`'s order (empty when it does not apply).
+    pub measurements: Vec<Measurement>,
+    /// The applied manual scale factors `(body, [sx, sy, sz])`, in the `ModelScaler`'s order.
+    pub manual_scales: Vec<(String, [f64; 3])>,
+}
+
+/// One `<Measurement>`: its factor is the mean over its marker pairs of (distance in the static
+/// trial / distance on the unscaled model), applied to the listed body axes.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Measurement {
+    pub name: String,
+    /// Marker name pairs.
+    pub pairs: Vec<(String, String)>,
+    /// Bodies scaled, with the axes (x, y, z) the factor applies to.
+    pub bodies: Vec<(String, [bool; 3])>,
 }
 
 /// Reads a Scale tool setup file.
@@ -58,7 +75,7 @@ pub fn parse_scale_setup(text: &str, file_name: &str, base: &Path) -> Result<Sca
     }
     if let Some(scaler) = child(tool, "ModelScaler").filter(|s| ctx.boolean(*s, "apply").ok().flatten() != Some(false))
     {
-        out.scale_groups = scale_groups(&ctx, scaler)?;
+        (out.scale_groups, out.measurements, out.manual_scales) = scale_groups(&ctx, scaler)?;
     }
     if let Some(placer) = child(tool, "MarkerPlacer") {
         out.place_markers = ctx.boolean(placer, "apply")?.unwrap_or(true);
@@ -77,7 +94,12 @@ pub fn parse_scale_setup(text: &str, file_name: &str, base: &Path) -> Result<Sca
 /// Per body and axis, the source of its factor: a measurement name or a manual factor.
 type AxisSources = BTreeMap<String, [Option<String>; 3]>;
 
-fn scale_groups(ctx: &Ctx<'_>, scaler: roxmltree::Node<'_, '_>) -> Result<Vec<ScaleGroup>, OsimError> {
+/// The scaler's groups, measurements and manual factors.
+type Scaler = (Vec<ScaleGroup>, Vec<Measurement>, Vec<(String, [f64; 3])>);
+
+fn scale_groups(ctx: &Ctx<'_>, scaler: roxmltree::Node<'_, '_>) -> Result<Scaler, OsimError> {
+    let mut measurements = Vec::new();
+    let mut manual = Vec::new();
     let order = ctx.text(scaler, "scaling_order").map(|(_, t)| t.to_string()).unwrap_or_default();
     let mut sources: AxisSources = BTreeMap::new();
     let mut first_seen: Vec<String> = Vec::new();
@@ -96,11 +118,21 @@ fn scale_groups(ctx: &Ctx<'_>, scaler: roxmltree::Node<'_, '_>) -> Result<Vec<Sc
                         continue;
                     }
                     let name = m.attribute("name").unwrap_or("measurement");
+                    let mut meas = Measurement { name: name.into(), ..Default::default() };
+                    for pair in set_objects(m, "MarkerPairSet").into_iter().filter(|n| n.has_tag_name("MarkerPair")) {
+                        let names: Vec<&str> =
+                            ctx.text(pair, "markers").map(|(_, t)| t.split_whitespace().collect()).unwrap_or_default();
+                        match names[..] {
+                            [a, b] => meas.pairs.push((a.into(), b.into())),
+                            _ => return Err(ctx.err(pair, "MarkerPair needs exactly two marker names")),
+                        }
+                    }
                     for bs in set_objects(m, "BodyScaleSet").into_iter().filter(|n| n.has_tag_name("BodyScale")) {
                         let Some(body) = bs.attribute("name") else {
                             return Err(ctx.err(bs, "BodyScale without a body name"));
                         };
                         let axes = ctx.text(bs, "axes").map(|(_, t)| t).unwrap_or("X Y Z");
+                        let mut on = [false; 3];
                         for a in axes.split_whitespace() {
                             let axis = match a {
                                 "X" | "x" => 0,
@@ -109,8 +141,11 @@ fn scale_groups(ctx: &Ctx<'_>, scaler: roxmltree::Node<'_, '_>) -> Result<Vec<Sc
                                 other => return Err(ctx.err(bs, format!("axis '{other}': expected X, Y or Z"))),
                             };
                             set(body, axis, format!("measurement {name}"));
+                            on[axis] = true;
                         }
+                        meas.bodies.push((body.to_string(), on));
                     }
+                    measurements.push(meas);
                 }
             }
             "manualScale" => {
@@ -125,6 +160,7 @@ fn scale_groups(ctx: &Ctx<'_>, scaler: roxmltree::Node<'_, '_>) -> Result<Vec<Sc
                     for (axis, v) in f.iter().enumerate() {
                         set(body, axis, format!("manual {v}"));
                     }
+                    manual.push((body.to_string(), [f[0], f[1], f[2]]));
                 }
             }
             _ => {}
@@ -139,7 +175,7 @@ fn scale_groups(ctx: &Ctx<'_>, scaler: roxmltree::Node<'_, '_>) -> Result<Vec<Sc
             None => groups.push((vec![body], src)),
         }
     }
-    Ok(groups
+    let groups = groups
         .into_iter()
         .map(|(bodies, src)| {
             let uniform = src[0].is_some() && src.iter().all(|s| *s == src[0]);
@@ -150,5 +186,6 @@ fn scale_groups(ctx: &Ctx<'_>, scaler: roxmltree::Node<'_, '_>) -> Result<Vec<Sc
                 range: [0.5, 2.0],
             }
         })
-        .collect())
+        .collect();
+    Ok((groups, measurements, manual))
 }

@@ -1,0 +1,7 @@
+//! The evaluation suite of METHOD.md ("Evaluation the method is judged by"): throughput and
+//! convergence per dataset beside the published and OpenSim figures ([`bench`]), and the leakage
+//! audit of the joint solve against a stage-wise scale-then-IK baseline ([`audit`]). Each part
+//! is a library function behind a `smocap` command; `docs/EVALUATION.md` holds their results.
+
+pub mod audit;
+pub mod bench;
