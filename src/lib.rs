@@ -8,6 +8,7 @@
 
 pub mod archive;
 pub mod cli;
+pub mod eval;
 pub mod io;
 pub mod kinematics;
 pub mod model;

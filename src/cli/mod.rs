@@ -6,6 +6,7 @@
 mod bench;
 mod convert;
 mod demo;
+mod eval_spine;
 mod inspect;
 mod markers;
 mod solve;
@@ -40,6 +41,8 @@ pub enum Command {
     Convert(convert::ConvertArgs),
     /// What a converted MCAP file holds: channels, message counts, run metadata, attachments.
     Inspect(inspect::InspectArgs),
+    /// Spine ablation on the shipped model: poly vs nopoly vs classical on a synthetic yoga-like trial.
+    EvalSpine(eval_spine::EvalSpineArgs),
 }
 
 /// Runs the command line; errors are printed with their causes.
@@ -54,6 +57,7 @@ pub fn main() -> ExitCode {
         Command::BenchBatch(a) => bench::run(a),
         Command::Convert(a) => convert::run(a),
         Command::Inspect(a) => inspect::run(a),
+        Command::EvalSpine(a) => eval_spine::run_cli(a),
     };
     match result {
         Ok(code) => ExitCode::from(code),
