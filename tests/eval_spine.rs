@@ -20,7 +20,10 @@ fn variants_drive_the_lumbar_levels_as_named() {
     let (m, base) = shipped();
     let map = |v| ProxyMap::new(&m, &variant_profile(&base, v, "L3_L4").unwrap()).unwrap();
     let spine_proxies = |pm: &ProxyMap| {
-        pm.proxies.iter().filter(|p| p.name.starts_with("lumbar_") || LEVELS.iter().any(|l| p.name.starts_with(l))).count()
+        pm.proxies
+            .iter()
+            .filter(|p| p.name.starts_with("lumbar_") || LEVELS.iter().any(|l| p.name.starts_with(l)))
+            .count()
     };
     let (poly, nopoly, classical) = (map(Variant::Poly), map(Variant::Nopoly), map(Variant::Classical));
     assert_eq!(spine_proxies(&poly), 3);
@@ -51,12 +54,12 @@ fn roughness_of_a_linear_spine_is_zero_and_of_a_kink_is_positive() {
     kinked[2][0][3] += 0.1;
     let r = roughness(&kinked);
     assert!(r.spatial_axis_deg2[0] > 0.0 && r.temporal_deg2["L2_L3_flexion"] > 0.0);
-    assert_eq!(r.spatial_axis_deg2[1], 0.0);
+    assert!(r.spatial_axis_deg2[1] < 1e-20);
 }
 
 #[test]
 fn tiny_ablation_reports_finite_metrics_for_every_variant() {
-    let opt = SpineOptions { frames: 40, ..SpineOptions::default() };
+    let opt = SpineOptions { frames: 40, repeats: 1, ..SpineOptions::default() };
     let r = run(&opt).expect("runs");
     assert_eq!(r.variants.len(), 3);
     assert_eq!(r.truth.temporal_deg2.len(), 18);

@@ -54,15 +54,18 @@ fn synthetic_trot_is_recovered_to_the_noise_level() {
     // The truth itself leaves residuals of RMS √3·σ per marker (σ per axis): a fit that found the
     // truth's basin cannot do worse than that; 10 % for frames stopped by the decrease test.
     let noise_rms_mm = 3f64.sqrt() * noise_m * 1e3;
+    let (se, pe) = (rep.scale_error_pct.expect("scale error"), rep.pose_error_deg.expect("pose error"));
+    eprintln!(
+        "dog trot: marker RMSE mean {:.3} mm (p90 {:.3}), joint angles {:.3}° RMSE, scales {:.3} % mean ({:.3} % max)",
+        rmse.mean, rmse.p90, pe.rmse, se.mean, se.max
+    );
     assert!(rmse.mean < 1.1 * noise_rms_mm, "marker RMSE mean {:.3} mm vs noise {noise_rms_mm:.3} mm", rmse.mean);
     assert!(rmse.p90 < 1.5 * noise_rms_mm, "marker RMSE p90 {:.3} mm", rmse.p90);
     // Scale factors: 2 mm noise on segments of 0.06-0.3 m, pooled over 20 calibration frames
     // with at least two markers per group, gives errors of a few tenths of a percent; 2 % is
     // several times that (a failed calibration is off by the spread of 10 %).
-    let se = rep.scale_error_pct.expect("scale error");
     assert!(se.mean < 2.0, "scale error mean {:.3} %, max {:.3} %", se.mean, se.max);
     // Joint angles: 2 mm over the shortest marker lever arms (~6 cm) is ~2°; the bound is twice.
-    let pe = rep.pose_error_deg.expect("pose error");
     assert!(pe.rmse < 4.0, "joint angle RMSE {:.3}° (p90 {:.3}°)", pe.rmse, pe.p90);
     assert_eq!(s.truth.scales.len(), ctx.proxy.proxies.iter().filter(|p| p.kind == ProxyKind::Scale).count());
 }

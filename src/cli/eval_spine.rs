@@ -21,6 +21,9 @@ pub struct EvalSpineArgs {
     /// The level left free in the classical variant.
     #[arg(long, default_value = "L3_L4")]
     pub classical_level: String,
+    /// Solves of each variant (round-robin) pooled for ms/frame.
+    #[arg(long, default_value_t = 3)]
+    pub repeats: usize,
     /// Write the JSON report here.
     #[arg(long)]
     pub report_json: Option<PathBuf>,
@@ -36,16 +39,18 @@ pub fn run_cli(a: EvalSpineArgs) -> anyhow::Result<u8> {
         noise_m: a.noise_mm * 1e-3,
         deviation: a.deviation,
         classical_level: a.classical_level.clone(),
+        repeats: a.repeats.max(1),
         ..SpineOptions::default()
     };
     println!(
-        "spine ablation: shipped model, {} yoga-like frames at {} Hz, {} mm noise, level deviation ±{:.0} %, seed {}, classical joint at {}; one thread",
+        "spine ablation: shipped model, {} yoga-like frames at {} Hz, {} mm noise, level deviation ±{:.0} %, seed {}, classical joint at {}; one thread, {} solves per variant",
         opt.frames,
         opt.rate_hz,
         a.noise_mm,
         opt.deviation * 100.0,
         opt.seed,
-        opt.classical_level
+        opt.classical_level,
+        opt.repeats
     );
     let r = run(&opt)?;
     println!(
@@ -92,7 +97,10 @@ pub fn run_cli(a: EvalSpineArgs) -> anyhow::Result<u8> {
         r.truth.temporal_axis_deg2.iter().sum::<f64>() / 3.0,
         r.truth.spatial_deg2
     );
-    println!("per axis ({}): spatial roughness deg², temporal roughness deg²/frame², total-angle error deg", AXES.join(", "));
+    println!(
+        "per axis ({}): spatial roughness deg², temporal roughness deg²/frame², total-angle error deg",
+        AXES.join(", ")
+    );
     for v in &r.variants {
         let f = |x: [f64; 3], p: usize| x.map(|v| format!("{v:.p$}")).join(" / ");
         println!(

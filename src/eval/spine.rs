@@ -68,6 +68,8 @@ pub struct SpineOptions {
     /// centroid of the flexion shares (1.106 m above the floor at the neutral pose; L3_L4 is at
     /// 1.096 m), flexion being the largest lumbar motion.
     pub classical_level: String,
+    /// Times each variant solves the trial (round-robin) for ms/frame. Default 3.
+    pub repeats: usize,
 }
 
 impl Default for SpineOptions {
@@ -79,6 +81,7 @@ impl Default for SpineOptions {
             noise_m: 0.002,
             deviation: 0.3,
             classical_level: "L3_L4".into(),
+            repeats: 3,
         }
     }
 }
@@ -105,7 +108,8 @@ pub struct VariantReport {
     pub pose_proxies: usize,
     pub spine_proxies: usize,
     pub marker_rmse_mm: MeanP50P90,
-    /// One thread, one lane (frames warm-started in sequence), calibration excluded.
+    /// One thread, one lane (frames warm-started in sequence), calibration excluded; over the
+    /// frames of all repeats.
     pub ms_per_frame: P50P90,
     pub iterations: P50P90,
     /// All moved rotational coordinates against the truth.
@@ -153,7 +157,10 @@ fn coupling<'a>(base: &'a Profile, axis: &str) -> Result<&'a Coupling, SpineErro
     let name = format!("lumbar_{axis}");
     base.couplings
         .iter()
-        .find(|c| c.proxy == name && c.coordinates.iter().eq(LEVELS.iter().map(|l| coordinate(l, axis)).collect::<Vec<_>>().iter()))
+        .find(|c| {
+            c.proxy == name
+                && c.coordinates.iter().eq(LEVELS.iter().map(|l| coordinate(l, axis)).collect::<Vec<_>>().iter())
+        })
         .ok_or(SpineError::MissingCoupling(name))
 }
 
@@ -295,13 +302,28 @@ pub fn run(opt: &SpineOptions) -> Result<SpineReport, SpineError> {
     let nopoly = ctx_of(Variant::Nopoly)?;
     let s = yoga_trial(&nopoly, &base, opt)?;
     let truth_q: Vec<[[f64; 6]; 3]> = s.truth.coordinates.iter().map(|q| spine_of(&nopoly, q)).collect();
-    let mut variants = Vec::new();
+    let mut setups = Vec::new();
     for v in Variant::ALL {
         let ctx = if v == Variant::Nopoly { nopoly.clone() } else { ctx_of(v)? };
         let cal = calibrate_subject(&ctx, &[("yoga", &s.trial)])?;
-        let r = solve_trial_with(&ctx, "yoga", &s.trial, &cal, 1, 1, None)?;
-        let tr = trial_report(&ctx, &r, Some(&s.truth));
-        let q: Vec<[[f64; 6]; 3]> = r.proxies.iter().map(|p| spine_of(&ctx, &ctx.proxy.state(p))).collect();
+        setups.push((v, ctx, cal));
+    }
+    // Solves are deterministic; the repeats only pool frame times, taken round-robin over the
+    // variants so that a change in machine load affects them alike.
+    let mut results: Vec<Option<crate::pipeline::TrialResult>> = vec![None; setups.len()];
+    let mut times: Vec<Vec<f64>> = vec![Vec::new(); setups.len()];
+    for _ in 0..opt.repeats.max(1) {
+        for (i, (_, ctx, cal)) in setups.iter().enumerate() {
+            let r = solve_trial_with(ctx, "yoga", &s.trial, cal, 1, 1, None)?;
+            times[i].extend(r.frame_seconds.iter().map(|t| t * 1e3));
+            results[i].get_or_insert(r);
+        }
+    }
+    let mut variants = Vec::new();
+    for ((v, ctx, _), (r, ms)) in setups.iter().zip(results.into_iter().zip(&times)) {
+        let r = r.expect("solved at least once");
+        let tr = trial_report(ctx, &r, Some(&s.truth));
+        let q: Vec<[[f64; 6]; 3]> = r.proxies.iter().map(|p| spine_of(ctx, &ctx.proxy.state(p))).collect();
         let (mut se, mut te) = (0.0, [0.0; 3]);
         for (est, tru) in q.iter().zip(&truth_q) {
             for a in 0..3 {
@@ -312,13 +334,13 @@ pub fn run(opt: &SpineOptions) -> Result<SpineReport, SpineError> {
             }
         }
         let n = q.len().max(1) as f64;
-        let spine_proxies = ctx.proxy.proxies.iter().filter(|p| p.name.starts_with("lumbar_") || LEVELS.iter().any(|l| p.name.starts_with(l))).count();
+        let is_spine = |name: &str| name.starts_with("lumbar_") || LEVELS.iter().any(|l| name.starts_with(l));
         variants.push(VariantReport {
-            variant: v,
+            variant: *v,
             pose_proxies: ctx.proxy.proxies.iter().filter(|p| p.kind != ProxyKind::Scale).count(),
-            spine_proxies,
+            spine_proxies: ctx.proxy.proxies.iter().filter(|p| is_spine(&p.name)).count(),
             marker_rmse_mm: tr.marker_rmse_mm.expect("solved trial"),
-            ms_per_frame: tr.ms_per_frame.expect("solved trial"),
+            ms_per_frame: P50P90::of(ms),
             iterations: tr.iterations.expect("solved trial"),
             pose_error_deg: tr.pose_error_deg,
             scale_error_pct: tr.scale_error_pct,
