@@ -157,10 +157,7 @@ fn coupling<'a>(base: &'a Profile, axis: &str) -> Result<&'a Coupling, SpineErro
     let name = format!("lumbar_{axis}");
     base.couplings
         .iter()
-        .find(|c| {
-            c.proxy == name
-                && c.coordinates.iter().eq(LEVELS.iter().map(|l| coordinate(l, axis)).collect::<Vec<_>>().iter())
-        })
+        .find(|c| c.proxy == name && c.coordinates.iter().cloned().eq(LEVELS.iter().map(|l| coordinate(l, axis))))
         .ok_or(SpineError::MissingCoupling(name))
 }
 
