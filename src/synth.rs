@@ -91,6 +91,19 @@ impl Wave {
 
 /// Synthesises a trial of `model` driven through `proxy`.
 pub fn synthesize(model: &Model, proxy: &ProxyMap, opt: &SynthOptions) -> Synthetic {
+    synthesize_with(model, proxy, opt, |_, _| {})
+}
+
+/// As [`synthesize`], with `shape(t, p)` called on each frame's proxies (time `t` in s) after the
+/// generic motion is drawn, to impose a motion of one's own on some proxies (a trot, a yoga
+/// sequence). The random streams do not depend on `shape`, so the rest of the trial (scales,
+/// other proxies, marker errors) is the same as [`synthesize`]'s for the seed.
+pub fn synthesize_with(
+    model: &Model,
+    proxy: &ProxyMap,
+    opt: &SynthOptions,
+    mut shape: impl FnMut(f64, &mut [f64]),
+) -> Synthetic {
     let mut rng = ChaCha8Rng::seed_from_u64(opt.seed);
     let np = proxy.np();
     let default = proxy.default_proxies();
@@ -170,6 +183,7 @@ pub fn synthesize(model: &Model, proxy: &ProxyMap, opt: &SynthOptions) -> Synthe
             let (lo, hi) = proxy.proxies[k].range;
             p[k] = (default[k] + opt.speed_m_s * t + 0.02 * waves[k].at(t)).clamp(lo, hi);
         }
+        shape(t, &mut p);
         proxy.apply(&p, &mut y, &mut dphi);
         cpu::forward(&moved, &y, &mut ws);
         for m in 0..nm {
@@ -219,4 +233,32 @@ pub fn synthesize(model: &Model, proxy: &ProxyMap, opt: &SynthOptions) -> Synthe
         warnings: Vec::new(),
     };
     Synthetic { trial, truth }
+}
+
+/// A periodic gait for [`synthesize_with`]: every bounded rotational proxy for which
+/// `phase_of(name)` gives a phase `φ` (rad) swings as `c + a·sin(2π·f·t + φ)` with amplitude
+/// `a = 0.15·(hi − lo)` about the proxy's default (the neutral pose), moved inward where needed to stay
+/// in the range (`c ∈ [lo + a, hi − a]`), replacing the generic motion; the other proxies keep
+/// theirs. For a trot, the diagonal limbs share a phase and the two diagonals are
+/// half a cycle apart (see `tests/models_dog.rs`).
+pub fn periodic_gait(
+    proxy: &ProxyMap,
+    freq_hz: f64,
+    phase_of: impl Fn(&str) -> Option<f64>,
+) -> impl FnMut(f64, &mut [f64]) {
+    let swings: Vec<(usize, f64, f64, f64)> = proxy
+        .proxies
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.kind == ProxyKind::Rotation && p.range.0.is_finite() && p.range.1.is_finite())
+        .filter_map(|(k, p)| {
+            let a = 0.15 * (p.range.1 - p.range.0);
+            phase_of(&p.name).map(|ph| (k, p.default.clamp(p.range.0 + a, p.range.1 - a), a, ph))
+        })
+        .collect();
+    move |t: f64, p: &mut [f64]| {
+        for &(k, mid, amp, ph) in &swings {
+            p[k] = mid + amp * (TAU * freq_hz * t + ph).sin();
+        }
+    }
 }

@@ -9,6 +9,7 @@ mod bench_table;
 mod convert;
 mod demo;
 mod export;
+mod eval_spine;
 mod inspect;
 mod markers;
 mod merge;
@@ -52,6 +53,8 @@ pub enum Command {
     MergeReports(merge::MergeArgs),
     /// A converted MCAP file's state channel as an OpenSim motion (`--mot`) and/or a CSV table (`--csv`).
     Export(export::ExportArgs),
+    /// Spine ablation on the shipped model: poly vs nopoly vs classical on a synthetic yoga-like trial.
+    EvalSpine(eval_spine::EvalSpineArgs),
 }
 
 /// Runs the command line; errors are printed with their causes.
@@ -70,6 +73,7 @@ pub fn main() -> ExitCode {
         Command::Inspect(a) => inspect::run(a),
         Command::MergeReports(a) => merge::run(a),
         Command::Export(a) => export::run(a),
+        Command::EvalSpine(a) => eval_spine::run_cli(a),
     };
     match result {
         Ok(code) => ExitCode::from(code),
