@@ -6,6 +6,7 @@
 mod bench;
 mod convert;
 mod demo;
+mod eval_presolve;
 mod inspect;
 mod markers;
 mod solve;
@@ -40,6 +41,8 @@ pub enum Command {
     Convert(convert::ConvertArgs),
     /// What a converted MCAP file holds: channels, message counts, run metadata, attachments.
     Inspect(inspect::InspectArgs),
+    /// Pre-solve on the hard synthetic set: outlier rate and overhead with never/auto/always.
+    EvalPresolve(eval_presolve::EvalPresolveArgs),
 }
 
 /// Runs the command line; errors are printed with their causes.
@@ -54,6 +57,7 @@ pub fn main() -> ExitCode {
         Command::BenchBatch(a) => bench::run(a),
         Command::Convert(a) => convert::run(a),
         Command::Inspect(a) => inspect::run(a),
+        Command::EvalPresolve(a) => eval_presolve::run(a),
     };
     match result {
         Ok(code) => ExitCode::from(code),

@@ -3,7 +3,7 @@
 //! segments solved in parallel, each cold-started. Frames with too few markers are reported and
 //! bridged from their neighbours.
 
-use super::lanes::{run_lanes, TrialInputs};
+use super::lanes::{resolve_outliers, run_lanes, TrialInputs};
 use super::matching::{match_names, MarkerMatch, MatchError};
 use super::stats::{GapStats, MarkerGaps};
 use super::Context;
@@ -14,7 +14,7 @@ use crate::model::proxy::ProxyKind;
 use crate::solve::calibrate::track;
 use crate::solve::init::wrap_angle;
 use crate::solve::placement::place_markers;
-use crate::solve::{calibrate, make_qp, Calibration, FrameSolver, FrameStats, FrameStatus};
+use crate::solve::{calibrate, make_qp, Calibration, FrameSolver, FrameStats, FrameStatus, Presolve};
 use std::time::Instant;
 
 /// Why a trial could not be solved.
@@ -46,6 +46,8 @@ pub struct TrialResult {
     pub calibration: Calibration,
     /// Frames bridged from neighbours because too few markers were observed.
     pub bridged: Vec<usize>,
+    /// Frames whose result came from the `auto` pre-solve pass (outliers solved again).
+    pub presolved: Vec<usize>,
     /// Model markers the trial does not provide, and trial labels the model lacks.
     pub unmatched_model: Vec<String>,
     pub unmatched_trial: Vec<String>,
@@ -273,6 +275,11 @@ pub fn solve_trial_with(
         None => run(),
     }
     .map_err(|e| TrialError::Backend { trial: name.into(), source: e })?;
+    let mut solved = solved;
+    let presolved = match settings.presolve {
+        Presolve::Auto => resolve_outliers(&eval, settings, &inputs, &bounds, &mut solved),
+        Presolve::Never | Presolve::Always => Vec::new(),
+    };
     let pieces = solved.into_iter().map(|r| r.expect("every frame lies in one segment"));
     let mut proxies = Vec::with_capacity(n);
     let mut stats = Vec::with_capacity(n);
@@ -316,6 +323,7 @@ pub fn solve_trial_with(
         frame_seconds,
         calibration: calibration.clone(),
         bridged,
+        presolved,
         unmatched_model: matched.unmatched_model.clone(),
         unmatched_trial: matched.unmatched_trial.clone(),
         renamed,
