@@ -187,7 +187,6 @@ impl Presolver {
                 if e1 < e0 {
                     p.copy_from_slice(&self.trial);
                     let rel = (e0 - e1) / e0.max(f64::MIN_POSITIVE);
-                    e0 = e1;
                     lambda = (lambda / 3.0).max(1e-9);
                     accepted = rel > 1e-4;
                     break;
