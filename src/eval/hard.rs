@@ -74,9 +74,8 @@ pub fn hard_set(model: &Model, proxy: &ProxyMap, frames: usize, seed: u64) -> Ve
     cases.push(case("extreme", model, proxy, truth, 100.0, &[], &mut rng));
 
     // Dropout bursts during large motion.
-    let truth = key_pose_motion(proxy, &base_motion.truth.proxies, 100.0, 0.5, 0.0, &mut rng, |rng| {
-        rng.random_range(0.1..0.9)
-    });
+    let truth =
+        key_pose_motion(proxy, &base_motion.truth.proxies, 100.0, 0.5, 0.0, &mut rng, |rng| rng.random_range(0.1..0.9));
     let carriers: Vec<usize> = (0..model.nb())
         .filter(|&b| model.bodies[b].parent.is_some() && model.markers.iter().any(|m| m.body == b))
         .collect();

@@ -85,7 +85,7 @@ pub fn evaluate(ctx: &Context, frames: usize, seed: u64) -> anyhow::Result<Preso
         let truth_rmse_mm_p50 = truth_rmse_mm(ctx, &case, &cal);
         cases.push(CaseResult { case: case.name.into(), threshold_mm: threshold, truth_rmse_mm_p50, modes });
     }
-    let overall = MODES
+    let mut overall: Vec<ModeResult> = MODES
         .iter()
         .enumerate()
         .map(|(i, &mode)| {
@@ -98,14 +98,13 @@ pub fn evaluate(ctx: &Context, frames: usize, seed: u64) -> anyhow::Result<Preso
             r.rmse_mm_p50 = quantile(&r.rmse_mm, 0.5);
             r.rmse_mm_p90 = quantile(&r.rmse_mm, 0.9);
             r.presolved = all.iter().map(|m| m.presolved).sum();
-            let total = |m: &ModeResult| m.ms_per_frame_mean * m.frames as f64;
-            r.ms_per_frame_mean = all.iter().map(|m| total(m)).sum::<f64>() / r.frames.max(1) as f64;
+            let total: f64 = all.iter().map(|m| m.ms_per_frame_mean * m.frames as f64).sum();
+            r.ms_per_frame_mean = total / r.frames.max(1) as f64;
             r.ms_per_frame_p50 = f64::NAN;
             r.max_angle_error_deg_p50 = f64::NAN;
             r
         })
-        .collect::<Vec<_>>();
-    let mut overall = overall;
+        .collect();
     let never_mean = overall[0].ms_per_frame_mean;
     for r in &mut overall {
         r.overhead = r.ms_per_frame_mean / never_mean;
@@ -290,7 +289,17 @@ impl PresolveEval {
     pub fn table(&self) -> String {
         let mut s = format!(
             "{:<10} {:<7} {:>6} {:>9} {:>9} {:>9} {:>8} {:>9} {:>9} {:>8} {:>9}\n",
-            "case", "mode", "frames", "outliers", "rmse p50", "rmse p90", "ms p50", "ms mean", "overhead", "re-solved", "ang p50"
+            "case",
+            "mode",
+            "frames",
+            "outliers",
+            "rmse p50",
+            "rmse p90",
+            "ms p50",
+            "ms mean",
+            "overhead",
+            "re-solved",
+            "ang p50"
         );
         let mut row = |case: &str, m: &ModeResult| {
             s.push_str(&format!(

@@ -185,7 +185,10 @@ pub fn run_lanes(
                 }
             }
         }
-        lanes.par_iter_mut().filter(|l| l.seg.is_some() && l.it.is_none()).for_each(|l| l.start_frame(inp, stride, presolve));
+        lanes
+            .par_iter_mut()
+            .filter(|l| l.seg.is_some() && l.it.is_none())
+            .for_each(|l| l.start_frame(inp, stride, presolve));
         if lanes.iter().all(|l| l.seg.is_none()) {
             break;
         }
