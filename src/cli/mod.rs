@@ -8,8 +8,9 @@ mod bench;
 mod bench_table;
 mod convert;
 mod demo;
-mod export;
+mod eval_presolve;
 mod eval_spine;
+mod export;
 mod inspect;
 mod markers;
 mod merge;
@@ -55,6 +56,8 @@ pub enum Command {
     Export(export::ExportArgs),
     /// Spine ablation on the shipped model: poly vs nopoly vs classical on a synthetic yoga-like trial.
     EvalSpine(eval_spine::EvalSpineArgs),
+    /// Pre-solve on the hard synthetic set: outlier rate and overhead with never/auto/always.
+    EvalPresolve(eval_presolve::EvalPresolveArgs),
 }
 
 /// Runs the command line; errors are printed with their causes.
@@ -74,6 +77,7 @@ pub fn main() -> ExitCode {
         Command::MergeReports(a) => merge::run(a),
         Command::Export(a) => export::run(a),
         Command::EvalSpine(a) => eval_spine::run_cli(a),
+        Command::EvalPresolve(a) => eval_presolve::run(a),
     };
     match result {
         Ok(code) => ExitCode::from(code),

@@ -65,6 +65,11 @@ pub struct SolveArgs {
     /// rescaled, or the model generated), and its scale set beside it (`.scaleset.xml`).
     #[arg(long)]
     pub scaled_model: Option<PathBuf>,
+    /// Pre-solve (root placement + root-to-leaf local fits before the trust-region QP): `never`;
+    /// `auto` re-solves frames whose RMSE is an outlier of their trial (median + 6 MAD); `always`
+    /// pre-solves every warm-started frame. Overrides the profile's `presolve` (default `auto`).
+    #[arg(long, value_enum)]
+    pub presolve: Option<crate::solve::Presolve>,
     #[command(flatten)]
     pub backend: super::BackendArgs,
 }
@@ -93,6 +98,9 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         qp: a.qp,
     };
     let Subject { mut ctx, static_path, notes } = prepare_subject(&files)?;
+    if let Some(mode) = a.presolve {
+        ctx.settings.presolve = mode;
+    }
     for n in &notes {
         eprintln!("{n}");
     }
@@ -163,6 +171,9 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
                         t.times.get(f).copied().unwrap_or(f64::NAN),
                         ctx.settings.min_markers
                     );
+                }
+                if !r.presolved.is_empty() {
+                    eprintln!("{name}: {} outlier frames improved by pre-solve", r.presolved.len());
                 }
                 let mut tr = trial_report(&ctx, &r, truth.as_ref());
                 tr.input = Some(conv.clone());

@@ -12,8 +12,9 @@ use crate::io::MarkerTrial;
 use crate::kinematics::assembly::{fold_tracking_reference, Evaluator, FrameProblem};
 use crate::kinematics::backend::{BackendError, BatchBackend, EnergyEval, FrameModel};
 use crate::solve::init::multi_start;
+use crate::solve::presolve::outlier_threshold;
 use crate::solve::trqp::{FrameIteration, Next};
-use crate::solve::{make_qp, FrameSolver, FrameStats, FrameStatus, SolverSettings, WarmStart};
+use crate::solve::{make_qp, FrameSolver, FrameStats, FrameStatus, Presolve, Presolver, SolverSettings, WarmStart};
 use rayon::prelude::*;
 use std::collections::VecDeque;
 use std::time::Instant;
@@ -79,9 +80,30 @@ struct Lane<'e> {
     dphi: Vec<f64>,
     /// The current frame's observations.
     obs: Vec<f64>,
+    presolver: Presolver,
 }
 
 impl<'e> Lane<'e> {
+    fn new(eval: &'e Evaluator<'e>, settings: &SolverSettings) -> Lane<'e> {
+        let (np, ny) = (eval.proxy.np(), eval.model.ny());
+        Lane {
+            solver: FrameSolver::new(eval, settings.clone(), make_qp(settings.qp)),
+            seg: None,
+            frame: 0,
+            p: vec![0.0; np],
+            prev: None,
+            prev2: None,
+            reference: vec![0.0; ny],
+            it: None,
+            next: Next::Done(idle_stats()),
+            started: Instant::now(),
+            y_warm: vec![0.0; ny],
+            dphi: vec![0.0; eval.proxy.terms.len()],
+            obs: vec![f64::NAN; 3 * eval.model.markers.len()],
+            presolver: Presolver::new(eval, settings, false),
+        }
+    }
+
     fn frame_problem<'a>(&'a self, inp: &TrialInputs<'a>) -> FrameProblem<'a> {
         FrameProblem {
             observed: &self.obs,
@@ -91,8 +113,10 @@ impl<'e> Lane<'e> {
         }
     }
 
-    /// Prepares `self.frame`: warm start, pose prior, cold start at a segment's beginning.
-    fn start_frame(&mut self, inp: &TrialInputs<'_>) {
+    /// Prepares `self.frame`: warm start, pose prior, cold start at a segment's beginning, and
+    /// with `presolve` the pre-solve of a warm-started frame (a cold start already places the root
+    /// and sweeps, [`multi_start`]). The pose prior stays at the warm start.
+    fn start_frame(&mut self, inp: &TrialInputs<'_>, presolve: bool) {
         let eval = self.solver.eval;
         let nq = eval.model.nq();
         self.started = Instant::now();
@@ -127,6 +151,14 @@ impl<'e> Lane<'e> {
             // A segment's first frame: several starts, the best kept; the iteration below then
             // only confirms it.
             multi_start(&mut self.solver, &frame, &mut self.p, inp.calibrated);
+        } else if presolve {
+            let frame = FrameProblem {
+                observed: &self.obs,
+                marker_weights: inp.marker_weights,
+                tracking_ref: &self.reference,
+                tracking_weights: inp.tracking_weights_all,
+            };
+            self.presolver.run(eval, &mut self.solver, &frame, &mut self.p);
         }
         self.it = Some(self.solver.begin(&mut self.p));
         self.next = Next::Linearize;
@@ -146,27 +178,11 @@ pub fn run_lanes<E: From<BackendError>>(
     backend: &mut dyn BatchBackend,
     done: &mut dyn FnMut(usize, FrameResult) -> Result<(), E>,
 ) -> Result<(), E> {
-    let (np, nm, ny) = (eval.proxy.np(), eval.model.markers.len(), eval.model.ny());
-    let stride = 3 * nm;
+    let (np, nm) = (eval.proxy.np(), eval.model.markers.len());
     let mut queue: VecDeque<(usize, usize)> = segments.iter().copied().filter(|(a, b)| b > a).collect();
     let n_lanes = lanes.max(1).min(queue.len().max(1));
-    let mut lanes: Vec<Lane<'_>> = (0..n_lanes)
-        .map(|_| Lane {
-            solver: FrameSolver::new(eval, settings.clone(), make_qp(settings.qp)),
-            seg: None,
-            frame: 0,
-            p: vec![0.0; np],
-            prev: None,
-            prev2: None,
-            reference: vec![0.0; ny],
-            it: None,
-            next: Next::Done(idle_stats()),
-            started: Instant::now(),
-            y_warm: vec![0.0; ny],
-            dphi: vec![0.0; eval.proxy.terms.len()],
-            obs: vec![f64::NAN; stride],
-        })
-        .collect();
+    let mut lanes: Vec<Lane<'_>> = (0..n_lanes).map(|_| Lane::new(eval, settings)).collect();
+    let presolve = settings.presolve == Presolve::Always;
     let mut models: Vec<FrameModel> = (0..n_lanes).map(|_| FrameModel::new(np, nm)).collect();
     let mut energies = vec![EnergyEval::default(); n_lanes];
     let mut px: Vec<f64> = Vec::with_capacity(n_lanes * np);
@@ -194,7 +210,7 @@ pub fn run_lanes<E: From<BackendError>>(
                 }
             }
         }
-        lanes.par_iter_mut().filter(|l| l.seg.is_some() && l.it.is_none()).for_each(|l| l.start_frame(inp));
+        lanes.par_iter_mut().filter(|l| l.seg.is_some() && l.it.is_none()).for_each(|l| l.start_frame(inp, presolve));
         if lanes.iter().all(|l| l.seg.is_none()) {
             break;
         }
@@ -235,6 +251,67 @@ pub fn run_lanes<E: From<BackendError>>(
         }
     }
     Ok(())
+}
+
+/// `auto` pre-solve: frames whose marker RMSE exceeds the trial's median + 6 MAD
+/// ([`outlier_threshold`]) are solved again from their warm start (the previous solved frame of
+/// their segment, as updated by this pass) with pre-solve, and the result with the lower energy
+/// is kept; the time spent is added to the frame's. Segments' first frames (cold-started from
+/// several starts, [`multi_start`]) and bridged frames are left. Frames are visited in order on
+/// the CPU, so the result does not depend on the lane count or backend. Returns the frames
+/// whose re-solved result was kept.
+pub fn resolve_outliers(
+    eval: &Evaluator<'_>,
+    settings: &SolverSettings,
+    inp: &TrialInputs<'_>,
+    segments: &[(usize, usize)],
+    results: &mut [Option<FrameResult>],
+) -> Vec<usize> {
+    let rmse: Vec<f64> = results.iter().filter_map(|r| solved(r).map(|r| r.1.rmse_m)).collect();
+    let threshold = outlier_threshold(&rmse);
+    let mut kept = Vec::new();
+    if threshold.is_nan() {
+        return kept;
+    }
+    let mut lane: Option<Lane<'_>> = None;
+    for &(a, b) in segments {
+        for f in a + 1..b.min(results.len()) {
+            let Some((_, old, _)) = solved(&results[f]) else { continue };
+            if old.rmse_m.is_nan() || old.rmse_m <= threshold {
+                continue;
+            }
+            let old_energy = old.energy;
+            let mut warm = (a..f).rev().filter_map(|g| solved(&results[g]).map(|r| r.0.clone()));
+            let Some(prev) = warm.next() else { continue };
+            let lane = lane.get_or_insert_with(|| Lane::new(eval, settings));
+            lane.prev2 = warm.next();
+            lane.prev = Some(prev);
+            lane.frame = f;
+            lane.start_frame(inp, true);
+            let frame = FrameProblem {
+                observed: &lane.obs,
+                marker_weights: inp.marker_weights,
+                tracking_ref: &lane.reference,
+                tracking_weights: inp.tracking_weights_all,
+            };
+            let stats = lane.solver.solve(&frame, &mut lane.p);
+            lane.it = None;
+            let spent = lane.started.elapsed().as_secs_f64();
+            let r = results[f].as_mut().expect("a solved frame");
+            if stats.status != FrameStatus::TooFewMarkers && stats.energy < old_energy {
+                *r = (lane.p.clone(), stats, r.2 + spent);
+                kept.push(f);
+            } else {
+                r.2 += spent;
+            }
+        }
+    }
+    kept
+}
+
+/// The result of a frame that was solved (not bridged).
+fn solved(r: &Option<FrameResult>) -> Option<&FrameResult> {
+    r.as_ref().filter(|r| r.1.status != FrameStatus::TooFewMarkers)
 }
 
 /// Gathers the lanes that need `what` into one batch and evaluates it; returns its size.

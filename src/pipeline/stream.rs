@@ -6,7 +6,7 @@
 //! frames of later segments wait for the earlier segments. With one lane (what `smocap convert`
 //! uses), what is held beyond the input trial is the current gap of unsolved frames.
 
-use super::lanes::{run_lanes, FrameObservations, FrameResult, TrialInputs};
+use super::lanes::{resolve_outliers, run_lanes, FrameObservations, FrameResult, TrialInputs};
 use super::stats::GapStats;
 use super::trial::{gap_stats, match_markers, no_match, SinkError, TrialError, TrialResult};
 use super::Context;
@@ -14,7 +14,7 @@ use crate::io::MarkerTrial;
 use crate::kinematics::backend::{BackendError, BatchBackend, CpuBackend};
 use crate::model::proxy::ProxyKind;
 use crate::solve::init::wrap_angle;
-use crate::solve::{Calibration, FrameStats, FrameStatus};
+use crate::solve::{Calibration, FrameStats, FrameStatus, Presolve};
 use std::collections::BTreeMap;
 use std::time::Instant;
 
@@ -47,6 +47,8 @@ pub struct StreamedTrial {
     /// `(file label, model marker)` for markers matched other than exactly.
     pub renamed: Vec<(String, String)>,
     pub gaps: GapStats,
+    /// Frames whose result came from the `auto` pre-solve pass (outliers solved again).
+    pub presolved: Vec<usize>,
     /// Wall time of all frames (s), calibration excluded, sink included.
     pub wall_seconds: f64,
     pub threads: usize,
@@ -211,13 +213,33 @@ pub fn solve_trial_streaming(
     // one during which a caller's rayon worker would take up other work (e.g. another trial).
     let pool =
         (threads > 1 || lanes > 1).then(|| rayon::ThreadPoolBuilder::new().num_threads(threads).build().ok()).flatten();
+    // `auto` pre-solve needs the whole trial's RMSE (median + 6 MAD) before any frame leaves, so
+    // it holds the solved frames (proxies and statistics, not observations) until its pass ends.
+    let auto = settings.presolve == Presolve::Auto;
+    let mut presolved = Vec::new();
     let run = || -> Result<(), Stop> {
-        let mut done = |f: usize, r: FrameResult| order.push(f, r, sink);
-        match backend {
-            Some(b) => run_lanes(&eval, settings, &inputs, &bounds, lanes, b, &mut done)?,
-            None => {
-                let mut cpu = CpuBackend::new(eval.clone());
-                run_lanes(&eval, settings, &inputs, &bounds, lanes, &mut cpu, &mut done)?
+        let mut held: Vec<Option<FrameResult>> = if auto { vec![None; n] } else { Vec::new() };
+        {
+            let mut done = |f: usize, r: FrameResult| {
+                if auto {
+                    held[f] = Some(r);
+                    Ok(())
+                } else {
+                    order.push(f, r, sink)
+                }
+            };
+            match backend {
+                Some(b) => run_lanes(&eval, settings, &inputs, &bounds, lanes, b, &mut done)?,
+                None => {
+                    let mut cpu = CpuBackend::new(eval.clone());
+                    run_lanes(&eval, settings, &inputs, &bounds, lanes, &mut cpu, &mut done)?
+                }
+            }
+        }
+        if auto {
+            presolved = resolve_outliers(&eval, settings, &inputs, &bounds, &mut held);
+            for (f, r) in held.into_iter().enumerate() {
+                order.push(f, r.expect("every frame lies in one segment"), sink)?;
             }
         }
         debug_assert!(order.early.is_empty() && order.next == n, "every frame lies in one segment");
@@ -242,6 +264,7 @@ pub fn solve_trial_streaming(
         unmatched_trial: matched.unmatched_trial.clone(),
         renamed,
         gaps: gap_stats(ctx, trial, map, bridged),
+        presolved,
         wall_seconds: start.elapsed().as_secs_f64(),
         threads,
     })
@@ -294,6 +317,7 @@ pub fn solve_trial_with(
         frame_seconds,
         calibration: calibration.clone(),
         bridged,
+        presolved: s.presolved,
         unmatched_model: s.unmatched_model,
         unmatched_trial: s.unmatched_trial,
         renamed: s.renamed,

@@ -48,6 +48,8 @@ pub struct TrialResult {
     pub calibration: Calibration,
     /// Frames bridged from neighbours because too few markers were observed.
     pub bridged: Vec<usize>,
+    /// Frames whose result came from the `auto` pre-solve pass (outliers solved again).
+    pub presolved: Vec<usize>,
     /// Model markers the trial does not provide, and trial labels the model lacks.
     pub unmatched_model: Vec<String>,
     pub unmatched_trial: Vec<String>,

@@ -1,15 +1,18 @@
 //! Solvers: the per-frame trust-region QP ([`trqp`]), its QP backends ([`qp`]), the cold start
-//! ([`init`]) and the multi-frame subject calibration ([`calibrate`]).
+//! ([`init`]), the pre-solve warm start ([`presolve`]) and the multi-frame subject calibration
+//! ([`calibrate`]).
 
 pub mod calibrate;
 pub mod init;
 pub mod placement;
+pub mod presolve;
 pub mod qp;
 pub mod settings;
 pub mod trqp;
 
 pub use calibrate::{calibrate, Calibration};
-pub use settings::{QpBackend, SolverSettings, WarmStart};
+pub use presolve::Presolver;
+pub use settings::{Presolve, QpBackend, SolverSettings, WarmStart};
 pub use trqp::{FrameSolver, FrameStats, FrameStatus};
 
 /// A QP backend as the settings name it.

@@ -26,6 +26,20 @@ pub enum WarmStart {
     Extrapolate,
 }
 
+/// When the trial pipeline runs the pre-solve.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum Presolve {
+    /// Never: every frame starts from its warm start (the behaviour before pre-solve existed).
+    Never,
+    /// After a trial is solved, frames whose marker RMSE exceeds median + 6 MAD of the trial
+    /// are solved again with pre-solve from their warm start; the lower-energy result is kept.
+    #[default]
+    Auto,
+    /// Every warm-started frame is pre-solved before its trust-region QP.
+    Always,
+}
+
 /// Trust-region QP settings (units: metres, radians; scale factors dimensionless).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -82,6 +96,15 @@ pub struct SolverSettings {
     /// are flagged fixed, only those inform the scales (the others are untrusted until placed).
     /// Default false.
     pub marker_placement: bool,
+    /// Pre-solve (METHOD.md; `src/solve/presolve.rs`): root placement and root-to-leaf sweeps
+    /// of local joint fits before the trust-region QP. Default `auto`: only frames whose marker
+    /// RMSE is an outlier of their trial (median + 6 MAD) are solved again with it, which leaves
+    /// ordinary frames untouched and costs time only where a frame went wrong (`smocap
+    /// eval-presolve` measures both; `docs/EVALUATION.md`).
+    pub presolve: Presolve,
+    /// Root-to-leaf sweeps per pre-solve. Default 2 (the second corrects parents for their
+    /// children's new poses, as the overlapping subproblems share markers).
+    pub presolve_sweeps: u32,
 }
 
 impl Default for SolverSettings {
@@ -109,6 +132,8 @@ impl Default for SolverSettings {
             calibration_scale_prior: 1e-6,
             calibration_max_iterations: 50,
             marker_placement: false,
+            presolve: Presolve::default(),
+            presolve_sweeps: 2,
         }
     }
 }
