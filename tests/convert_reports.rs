@@ -174,6 +174,6 @@ fn export_gives_the_motion_smocap_solve_writes_and_a_csv_row_per_frame() {
         assert_eq!(cells.len(), header.len());
         assert_eq!(cells[1], f.to_string());
         let rmse: f64 = cells[cells.len() - 2].parse().unwrap();
-        assert!(rmse >= 0.0 && rmse < 0.05, "frame {f}: RMSE {rmse} m");
+        assert!((0.0..0.05).contains(&rmse), "frame {f}: RMSE {rmse} m");
     }
 }

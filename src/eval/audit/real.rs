@@ -66,7 +66,11 @@ fn opensim(reference: &Path, dataset: &str, stem: &str) -> Option<MeanP50P90> {
     let dir = reference.join(dataset);
     std::fs::read_dir(dir).ok()?.filter_map(|e| e.ok()).find_map(|e| {
         let s: Summary = serde_json::from_str(&std::fs::read_to_string(e.path()).ok()?).ok()?;
-        (s.tag == stem).then(|| MeanP50P90 { mean: s.rms_mean_m * 1e3, p50: s.rms_p50_m * 1e3, p90: s.rms_p90_m * 1e3 })
+        (s.tag == stem).then_some(MeanP50P90 {
+            mean: s.rms_mean_m * 1e3,
+            p50: s.rms_p50_m * 1e3,
+            p90: s.rms_p90_m * 1e3,
+        })
     })
 }
 

@@ -15,7 +15,10 @@ use crate::pipeline::Context;
 /// Marker pairs of the shipped model (`models/fullbody.xml`) per scale group of its profile, as a
 /// typical OpenSim scale setup chooses them: landmarks on the segment, or at the joints that bound
 /// it (so most pairs span one segment and are nearly pose-independent in a standing pose).
-const SHIPPED: &[(&str, &[&str], &[(&str, &str)])] = &[
+/// One scale group of the shipped model: its name, its bodies, and the marker pairs measuring it.
+type PairTable = (&'static str, &'static [&'static str], &'static [(&'static str, &'static str)]);
+
+const SHIPPED: &[PairTable] = &[
     ("pelvis", &["pelvis"], &[("RASI", "LASI"), ("RPSI", "LPSI"), ("RASI", "RPSI"), ("LASI", "LPSI")]),
     ("lumbar", &["lumbar5", "lumbar4", "lumbar3", "lumbar2", "lumbar1"], &[("SACR", "L3"), ("L3", "T10")]),
     ("torso", &["torso"], &[("C7", "T10"), ("CLAV", "STRN"), ("LSHO", "RSHO")]),
