@@ -255,7 +255,12 @@ fn subject(
     let fail_all = |why: String| -> Vec<TrialOutcome> {
         todo.iter().map(|(t, out, _)| failed(d, g, t, out, why.clone())).inspect(report).collect()
     };
-    let mut sub = match prepare_subject(&d.subject_files(g.static_trial.clone())) {
+    let mut files = d.subject_files(g.static_trial.clone());
+    match d.subject_info(&g.subject) {
+        Ok(info) => files.subject = info,
+        Err(e) => return [outcomes, fail_all(format!("subject setup: {e}"))].concat(),
+    }
+    let mut sub = match prepare_subject(&files) {
         Ok(s) => s,
         Err(e) => return [outcomes, fail_all(format!("subject setup: {e}"))].concat(),
     };
@@ -300,7 +305,7 @@ fn subject(
                 ctx,
                 &calibration,
                 text.as_deref().map(|t| (t, name.as_str())),
-                crate::io::osim::MassScaling::default(),
+                crate::io::osim::MassScaling { subject_mass: ctx.subject.mass_kg, ..Default::default() },
             )
             .ok()
             .map(|(m, _)| m);
