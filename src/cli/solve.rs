@@ -2,7 +2,7 @@
 
 use crate::pipeline::report::{trial_report, Report};
 use crate::pipeline::solve_trial_with;
-use crate::pipeline::subject::{calibrate_placed, prepare_subject, Subject, SubjectFiles};
+use crate::pipeline::subject::{calibrate_placed_with, prepare_subject, Subject, SubjectFiles};
 use crate::solve::QpBackend;
 use crate::synth::Truth;
 use anyhow::Context as _;
@@ -167,15 +167,18 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
             Err(e) => report.push(Report::failed(&name, format!("{e:#}"))),
         }
     }
-    let calibration_input: Vec<(&str, &crate::io::MarkerTrial)> = match (&static_path, &static_trial) {
+    // The subject's morphology from all its data: the static trial (when there is one) and
+    // frames of every motion trial.
+    let statics: Vec<(&str, &crate::io::MarkerTrial)> = match (&static_path, &static_trial) {
         (Some(p), Some(st)) => vec![(p.to_str().unwrap_or("static"), st)],
-        _ => loaded.iter().map(|(n, t, _)| (n.as_str(), t)).collect(),
+        _ => Vec::new(),
     };
+    let motions: Vec<(&str, &crate::io::MarkerTrial)> = loaded.iter().map(|(n, t, _)| (n.as_str(), t)).collect();
     let generic = ctx.clone();
-    let calibration = if calibration_input.is_empty() {
+    let calibration = if statics.is_empty() && motions.is_empty() {
         None
     } else {
-        Some(calibrate_placed(&ctx, &calibration_input).map(|(c, placed)| {
+        Some(calibrate_placed_with(&ctx, &statics, &motions).map(|(c, placed)| {
             // Marker placement moved the subject's markers: solve with them.
             if let Some(p) = placed {
                 ctx = p;

@@ -19,7 +19,7 @@ use crate::kinematics::assembly::FrameProblem;
 use crate::model::anthropometry::{resolve, stature_ratio, Survey};
 use crate::model::proxy::ProxyKind;
 use crate::model::MarkerClass;
-use crate::solve::calibrate::{finish, initial_state, track, JointProblem};
+use crate::solve::calibrate::{finish, initial_state_weighted, track, JointProblem};
 use crate::solve::placement::place_markers;
 use crate::solve::prior::{measure, Anisotropy, Anthropometric, GlobalTerm, OffsetPrior, PriorReport, ScaleReport, ScaleToward};
 use crate::solve::{make_qp, Calibration, FrameSolver};
@@ -155,44 +155,68 @@ fn governing(a: &Anthropometric, p: &[f64], scale: &[usize]) -> Vec<Option<usize
 }
 
 /// Calibrates one subject's morphology (and, with registration, its markers' offsets) from
-/// frames pooled over `trials` (a static trial, or the motion trials themselves).
+/// frames pooled over `trials`: a static trial when the context says it calibrates on one
+/// (`static_calibration`), else the motion trials themselves.
 pub fn calibrate_subject(ctx: &Context, trials: &[(&str, &MarkerTrial)]) -> Result<Calibration, TrialError> {
+    if ctx.static_calibration {
+        calibrate_subject_with(ctx, trials, &[])
+    } else {
+        calibrate_subject_with(ctx, &[], trials)
+    }
+}
+
+/// Which weights a calibration frame uses.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Static,
+    Motion,
+}
+
+/// Calibrates one subject from its static trials and its motion trials together: one
+/// morphology that fits both (`calibration_frames` from the static trials with their weights,
+/// `calibration_frames_motion` spread over the motion trials with the motion weights). Marker
+/// placement (OpenSim's MarkerPlacer) places on the static frames when there are any.
+pub fn calibrate_subject_with(
+    ctx: &Context,
+    statics: &[(&str, &MarkerTrial)],
+    motions: &[(&str, &MarkerTrial)],
+) -> Result<Calibration, TrialError> {
     let started = std::time::Instant::now();
     let settings = &ctx.settings;
     ctx.subject.validate()?;
     let nm = ctx.model.markers.len();
     let stride = 3 * nm;
-    let wanted = if ctx.static_calibration { settings.calibration_frames } else { settings.calibration_frames_motion };
-    let per_trial = wanted.div_ceil(trials.len().max(1));
     let eval = ctx.evaluator();
     let placing = settings.marker_placement;
     let registering = settings.registration && !placing;
     let classes = ctx.marker_classes();
     let any_fixed = ctx.model.markers.iter().any(|m| m.fixed);
+    let anatomical = classes.iter().filter(|c| **c == MarkerClass::Anatomical).count();
     // Weights of the first stage: with placement, markers flagged fixed alone inform the
     // scales (when the model flags any); with registration, anatomical markers alone (when
     // there are enough of them).
-    let anatomical = classes.iter().filter(|c| **c == MarkerClass::Anatomical).count();
-    let all_w = ctx.calibration_weights.clone();
-    let first_w: Vec<f64> = ctx
-        .model
-        .markers
-        .iter()
-        .zip(&all_w)
-        .zip(&classes)
-        .map(|((m, &w), c)| {
-            if placing && any_fixed && !m.fixed {
-                0.0
-            } else if registering && anatomical >= 6 && *c == MarkerClass::Tracking {
-                0.0
-            } else {
-                w
-            }
-        })
-        .collect();
+    let first = |all: &[f64]| -> Vec<f64> {
+        ctx.model
+            .markers
+            .iter()
+            .zip(all)
+            .zip(&classes)
+            .map(|((m, &w), c)| {
+                if (placing && any_fixed && !m.fixed)
+                    || (registering && anatomical >= 6 && *c == MarkerClass::Tracking)
+                {
+                    0.0
+                } else {
+                    w
+                }
+            })
+            .collect()
+    };
+    let all_w = |k: Kind| if k == Kind::Static { &ctx.calibration_weights } else { &ctx.marker_weights };
+    let first_static = first(all_w(Kind::Static));
+    let first_motion = first(all_w(Kind::Motion));
+    let first_w = |k: Kind| if k == Kind::Static { &first_static } else { &first_motion };
     let (coord_ref, coord_w) = ctx.coordinate_tracking();
-    let template =
-        FrameProblem { observed: &[], marker_weights: &first_w, tracking_ref: &coord_ref, tracking_weights: &coord_w };
     let mut solver = FrameSolver::new(&eval, settings.clone(), make_qp(settings.qp));
     let np = ctx.proxy.np();
     let scale: Vec<usize> = (0..np).filter(|&k| ctx.proxy.proxies[k].kind == ProxyKind::Scale).collect();
@@ -204,44 +228,57 @@ pub fn calibrate_subject(ctx: &Context, trials: &[(&str, &MarkerTrial)]) -> Resu
     }
     let mut pooled: Vec<f64> = Vec::new();
     let mut starts: Vec<Vec<f64>> = Vec::new();
-    for (name, t) in trials {
+    let mut kinds: Vec<Kind> = Vec::new();
+    let inputs = statics.iter().map(|t| (t, Kind::Static)).chain(motions.iter().map(|t| (t, Kind::Motion)));
+    for ((name, t), kind) in inputs {
+        let wanted = if kind == Kind::Static { settings.calibration_frames } else { settings.calibration_frames_motion };
+        let count = if kind == Kind::Static { statics.len() } else { motions.len() };
+        let per_trial = wanted.div_ceil(count.max(1));
         let map = match_markers(ctx, name, t)?.columns;
         if map.iter().all(Option::is_none) {
             return Err(no_match(ctx, name, t));
         }
+        let w1 = first_w(kind);
         let o = observations(t, &map);
-        units_check(ctx, name, &o, stride, &all_w, &p0)?;
-        let chosen = calibration_frames(&o, &first_w, stride, per_trial, settings.min_markers);
+        units_check(ctx, name, &o, stride, all_w(kind), &p0)?;
+        let chosen = calibration_frames(&o, w1, stride, per_trial, settings.min_markers);
         let Some(&last) = chosen.last() else { continue };
         // Track from the first frame to the last chosen one so that every chosen frame starts
         // from a pose continuous with the motion (a cold start far into a motion can land in a
         // wrong local minimum).
-        let first = (0..=last)
-            .find(|&f| observed_count(&o[f * stride..(f + 1) * stride], &first_w) >= settings.min_markers)
+        let begin = (0..=last)
+            .find(|&f| observed_count(&o[f * stride..(f + 1) * stride], w1) >= settings.min_markers)
             .unwrap_or(0);
-        let slices: Vec<&[f64]> = (first..=last).map(|f| &o[f * stride..(f + 1) * stride]).collect();
+        let slices: Vec<&[f64]> = (begin..=last).map(|f| &o[f * stride..(f + 1) * stride]).collect();
+        let template =
+            FrameProblem { observed: &[], marker_weights: w1, tracking_ref: &coord_ref, tracking_weights: &coord_w };
         let tracked = track(&mut solver, &slices, &template, &p0);
         for f in chosen {
             pooled.extend_from_slice(&o[f * stride..(f + 1) * stride]);
-            starts.push(tracked[f - first].clone());
+            starts.push(tracked[f - begin].clone());
+            kinds.push(kind);
         }
     }
     if pooled.is_empty() {
-        let trial = trials.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ");
+        let trial = statics.iter().chain(motions).map(|(n, _)| *n).collect::<Vec<_>>().join(", ");
         return Err(TrialError::NothingToCalibrate { trial, min: settings.min_markers });
     }
     let slices: Vec<&[f64]> = pooled.chunks(stride).collect();
+    let w_first: Vec<&[f64]> = kinds.iter().map(|&k| first_w(k).as_slice()).collect();
+    let w_all: Vec<&[f64]> = kinds.iter().map(|&k| all_w(k).as_slice()).collect();
+    let template =
+        FrameProblem { observed: &[], marker_weights: &first_motion, tracking_ref: &coord_ref, tracking_weights: &coord_w };
     let generic: Vec<Vector3<f64>> = ctx.model.markers.iter().map(|m| m.offset).collect();
     let none = vec![false; nm];
     // Stage 1: scales and poses on the first-stage markers.
-    let mut state = initial_state(&mut solver, &slices, &template, &p0, &starts);
+    let mut state = initial_state_weighted(&mut solver, &slices, &w_first, &template, &p0, &starts);
     let terms: Vec<&dyn GlobalTerm> = pri.terms.iter().map(|t| t.as_ref()).chain(pri.anthro.as_ref().map(|a| a as &dyn GlobalTerm)).collect();
     let stage1 = JointProblem {
         model: &ctx.model,
         proxy: &ctx.proxy,
         settings,
         frames: &slices,
-        marker_weights: &first_w,
+        weights: &w_first,
         tracking_ref: &coord_ref,
         tracking_weights: &coord_w,
         registered: &none,
@@ -264,10 +301,17 @@ pub fn calibrate_subject(ctx: &Context, trials: &[(&str, &MarkerTrial)]) -> Resu
     }
     let mut offsets = None;
     let mut registered = 0;
+    // Frames that placement and registration initialise offsets from: the static ones if any.
+    let place_on: Vec<usize> = match kinds.iter().any(|k| *k == Kind::Static) {
+        true => (0..kinds.len()).filter(|&i| kinds[i] == Kind::Static).collect(),
+        false => (0..kinds.len()).collect(),
+    };
+    let place_frames: Vec<&[f64]> = place_on.iter().map(|&i| slices[i]).collect();
+    let place_poses: Vec<Vec<f64>> = place_on.iter().map(|&i| state.poses[i].clone()).collect();
     if registering {
         // Stage 2: tracking markers start where the stage-1 poses saw them.
         let tracking: Vec<bool> = classes.iter().map(|c| *c == MarkerClass::Tracking).collect();
-        let placed = place_markers(&ctx.model, &ctx.proxy, &slices, &state.poses, &tracking);
+        let placed = place_markers(&ctx.model, &ctx.proxy, &place_frames, &place_poses, &tracking);
         let b = settings.registration_bound_m;
         for (m, p) in placed.iter().enumerate() {
             if let Some(p) = p {
@@ -285,28 +329,22 @@ pub fn calibrate_subject(ctx: &Context, trials: &[(&str, &MarkerTrial)]) -> Resu
         let offset_prior = OffsetPrior { reference: generic.clone(), weight };
         let mut all_terms = terms.clone();
         all_terms.push(&offset_prior);
-        let reg: Vec<bool> = all_w.iter().map(|&w| w > 0.0).collect();
-        let stage2 = JointProblem {
-            marker_weights: &all_w,
-            registered: &reg,
-            bound_m: b,
-            terms: &all_terms,
-            ..stage1
-        };
+        let reg: Vec<bool> = (0..nm).map(|m| w_all.iter().any(|w| w[m] > 0.0)).collect();
+        let stage2 = JointProblem { weights: &w_all, registered: &reg, bound_m: b, terms: &all_terms, ..stage1 };
         out = stage2.solve(&mut state);
         iterations += out.iterations;
         registered = reg.iter().filter(|r| **r).count();
         offsets = Some(state.offsets.clone());
     } else if placing {
         let movable: Vec<bool> = ctx.model.markers.iter().map(|m| !m.fixed).collect();
-        let placed = place_markers(&ctx.model, &ctx.proxy, &slices, &state.poses, &movable);
+        let placed = place_markers(&ctx.model, &ctx.proxy, &place_frames, &place_poses, &movable);
         offsets = Some(placed.iter().zip(&ctx.model.markers).map(|(p, m)| p.unwrap_or(m.offset)).collect());
     }
     out.iterations = iterations;
     let cal = finish(state, out, &p0, &ctx.proxy, offsets, registered, started);
     let report = prior_report(ctx, &pri, &scale, &cal);
     if let Some(h) = report.stature_m.filter(|h| !(0.5..=2.6).contains(h)) {
-        let trial = trials.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ");
+        let trial = statics.iter().chain(motions).map(|(n, _)| *n).collect::<Vec<_>>().join(", ");
         return Err(TrialError::Implausible {
             trial,
             message: format!(

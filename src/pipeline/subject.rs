@@ -159,3 +159,15 @@ pub fn calibrate_placed(
     let placed = c.marker_offsets.as_ref().map(|o| ctx.with_marker_offsets(o)).transpose()?;
     Ok((c, placed))
 }
+
+/// [`calibrate_placed`] on the subject's static trials and motion trials together
+/// ([`super::calibration::calibrate_subject_with`]).
+pub fn calibrate_placed_with(
+    ctx: &Context,
+    statics: &[(&str, &MarkerTrial)],
+    motions: &[(&str, &MarkerTrial)],
+) -> Result<(Calibration, Option<Context>), SetupError> {
+    let c = super::calibration::calibrate_subject_with(ctx, statics, motions)?;
+    let placed = c.marker_offsets.as_ref().map(|o| ctx.with_marker_offsets(o)).transpose()?;
+    Ok((c, placed))
+}

@@ -94,7 +94,8 @@ pub struct JointProblem<'a> {
     pub settings: &'a SolverSettings,
     /// Observed markers per frame (`3·marker + axis`, m, NaN gaps).
     pub frames: &'a [&'a [f64]],
-    pub marker_weights: &'a [f64],
+    /// Marker weights of each frame (a static trial's and a motion's may differ).
+    pub weights: &'a [&'a [f64]],
     /// Coordinate targets (length ny) and weights.
     pub tracking_ref: &'a [f64],
     pub tracking_weights: &'a [f64],
@@ -151,8 +152,11 @@ impl JointProblem<'_> {
         let mut next = ns;
         (0..self.model.markers.len())
             .map(|m| {
-                let seen = self.marker_weights[m] > 0.0
-                    && self.frames.iter().any(|f| f[3 * m..3 * m + 3].iter().all(|v| !v.is_nan()));
+                let seen = self
+                    .frames
+                    .iter()
+                    .zip(self.weights)
+                    .any(|(f, w)| w[m] > 0.0 && f[3 * m..3 * m + 3].iter().all(|v| !v.is_nan()));
                 (self.registered[m] && seen).then(|| {
                     next += 3;
                     next - 3
@@ -167,10 +171,10 @@ impl JointProblem<'_> {
         let eval = Evaluator::new(&model, self.proxy);
         let mut ws = EvalWorkspace::new(&model, self.proxy);
         let (mut e, mut rmse, mut counted) = (0.0, 0.0, 0);
-        for (obs, p) in self.frames.iter().zip(&state.poses) {
+        for ((obs, p), w) in self.frames.iter().zip(&state.poses).zip(self.weights) {
             let fp = FrameProblem {
                 observed: obs,
-                marker_weights: self.marker_weights,
+                marker_weights: w,
                 tracking_ref: self.tracking_ref,
                 tracking_weights: self.tracking_weights,
             };
@@ -215,7 +219,7 @@ impl JointProblem<'_> {
                 rhs -= gz;
             }
             let mut blocks: Vec<Option<FrameBlocks>> = Vec::with_capacity(self.frames.len());
-            for (obs, p) in self.frames.iter().zip(&state.poses) {
+            for ((obs, p), mw) in self.frames.iter().zip(&state.poses).zip(self.weights) {
                 // Coordinate targets alone (marker weights 0) give the tracking part of H and g.
                 let tp = FrameProblem {
                     observed: obs,
@@ -226,20 +230,20 @@ impl JointProblem<'_> {
                 eval.linearize(p, &tp, &mut ws);
                 let mut a = ws.gn.h.select_rows(&pose).select_columns(&pose);
                 let mut gq = ws.gn.g.select_rows(&pose);
-                let fp = FrameProblem { marker_weights: self.marker_weights, ..tp };
+                let fp = FrameProblem { marker_weights: mw, ..tp };
                 eval.energy(p, &fp, &mut ws);
                 cpu::jacobian(&model, &eval.layout, &mut ws.kin);
                 let jm = eval.marker_jacobian(&ws);
                 // Rows of observed, weighted markers, scaled by √w.
                 let rows: Vec<usize> = (0..nm)
-                    .filter(|&m| self.marker_weights[m] > 0.0 && obs[3 * m..3 * m + 3].iter().all(|v| !v.is_nan()))
+                    .filter(|&m| mw[m] > 0.0 && obs[3 * m..3 * m + 3].iter().all(|v| !v.is_nan()))
                     .collect();
                 let nr = 3 * rows.len();
                 let mut jq = DMatrix::zeros(nr, nq);
                 let mut js = DMatrix::zeros(nr, ns);
                 let mut r = DVector::zeros(nr);
                 for (i, &m) in rows.iter().enumerate() {
-                    let sw = self.marker_weights[m].sqrt();
+                    let sw = mw[m].sqrt();
                     for a in 0..3 {
                         let row = 3 * m + a;
                         r[3 * i + a] = sw * (ws.kin.markers[row] - obs[row]);
@@ -269,7 +273,7 @@ impl JointProblem<'_> {
                         ws.y[model.scale_index(bdy, 1)],
                         ws.y[model.scale_index(bdy, 2)],
                     );
-                    let sw = self.marker_weights[m].sqrt();
+                    let sw = mw[m].sqrt();
                     let jo = ws.kin.body_rot[bdy] * nalgebra::Matrix3::from_diagonal(&sb) * sw;
                     let jq_m = jq.rows(3 * i, 3);
                     let js_m = js.rows(3 * i, 3);
@@ -394,12 +398,13 @@ pub fn calibrate(
     let mut state = initial_state(solver, frames, frame_template, p0, starts);
     let offsets: Vec<Vector3<f64>> = model.markers.iter().map(|m| m.offset).collect();
     let registered = vec![false; model.markers.len()];
+    let weights = vec![frame_template.marker_weights; frames.len()];
     let problem = JointProblem {
         model,
         proxy,
         settings: &solver.settings,
         frames,
-        marker_weights: frame_template.marker_weights,
+        weights: &weights,
         tracking_ref: frame_template.tracking_ref,
         tracking_weights: frame_template.tracking_weights,
         registered: &registered,
@@ -419,11 +424,24 @@ pub fn initial_state(
     p0: &[f64],
     starts: &[Vec<f64>],
 ) -> JointState {
+    let weights = vec![frame_template.marker_weights; frames.len()];
+    initial_state_weighted(solver, frames, &weights, frame_template, p0, starts)
+}
+
+/// [`initial_state`] with each frame's own marker weights.
+pub fn initial_state_weighted(
+    solver: &mut FrameSolver<'_>,
+    frames: &[&[f64]],
+    weights: &[&[f64]],
+    frame_template: &FrameProblem<'_>,
+    p0: &[f64],
+    starts: &[Vec<f64>],
+) -> JointState {
     let proxy = solver.eval.proxy;
     let np = proxy.np();
     let mut poses = Vec::with_capacity(frames.len());
-    for (obs, start) in frames.iter().zip(starts) {
-        let fp = FrameProblem { observed: obs, ..*frame_template };
+    for ((obs, start), w) in frames.iter().zip(starts).zip(weights) {
+        let fp = FrameProblem { observed: obs, marker_weights: w, ..*frame_template };
         let mut p = start.clone();
         for k in 0..np {
             if proxy.proxies[k].kind == ProxyKind::Scale {
