@@ -122,15 +122,16 @@ pub enum MarkerClass {
 
 /// Each marker's registration class: the profile's lists (`tracking`, `anatomical`) first, then
 /// the model file's flag; a marker the file does not flag is anatomical, except that when the
-/// file flags none of its markers, names ending in a digit that share their prefix with another
-/// such name (`r_thigh1` … `r_thigh5`) form a cluster of tracking markers.
+/// file flags none of its markers, names ending in a digit that share their prefix (of three
+/// characters or more, so that vertebrae such as `T10`, `T12` are not one) with another such name
+/// (`r_thigh1` … `r_thigh5`) form a cluster of tracking markers.
 pub fn marker_classes(model: &Model, tracking: &[String], anatomical: &[String]) -> Vec<MarkerClass> {
     let none_flagged = model.markers.iter().all(|m| m.class.is_none());
     let stem = |n: &str| n.trim_end_matches(|c: char| c.is_ascii_digit()).to_string();
     let numbered: Vec<Option<String>> = model
         .markers
         .iter()
-        .map(|m| (m.name.ends_with(|c: char| c.is_ascii_digit())).then(|| stem(&m.name)).filter(|s| !s.is_empty()))
+        .map(|m| (m.name.ends_with(|c: char| c.is_ascii_digit())).then(|| stem(&m.name)).filter(|s| s.len() >= 3))
         .collect();
     model
         .markers

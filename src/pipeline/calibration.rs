@@ -289,9 +289,10 @@ pub fn calibrate_subject_with(
     let mut out = stage1.solve(&mut state);
     let mut iterations = out.iterations;
     // Empirical Bayes: the scale priors are weighed against the marker error the data show
-    // (stage 1's RMSE, within [2, 30] mm) rather than a fixed one: clean data (a static trial,
-    // noise of a millimetre) outweigh the survey, noisy motion data lean on it more.
-    let noise = out.rmse_m.clamp(0.002, 0.03);
+    // (stage 1's RMSE, within [0.5, 30] mm: half a millimetre is about what optical motion
+    // capture resolves) rather than a fixed one: clean data (a static trial, noise of a
+    // millimetre) outweigh the survey, noisy motion data lean on it more.
+    let noise = out.rmse_m.clamp(0.0005, 0.03);
     let pri = priors(ctx, &scale, if out.rmse_m.is_finite() { noise } else { settings.prior_noise_sd_m })?;
     let terms: Vec<&dyn GlobalTerm> = pri.terms.iter().map(|t| t.as_ref()).chain(pri.anthro.as_ref().map(|a| a as &dyn GlobalTerm)).collect();
     let stage1 = JointProblem { terms: &terms, ..stage1 };
