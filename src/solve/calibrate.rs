@@ -363,7 +363,9 @@ impl JointProblem<'_> {
                 energy = e1;
                 rmse = r1;
                 lambda = (lambda / 3.0).max(1e-9);
-                if rel < s.calibration_rel_tol {
+                // Converged: the objective stopped falling, or the subject stopped moving (scale
+                // factors and offsets changed by less than 1e-5, i.e. 10 µm on a metre).
+                if rel < s.calibration_rel_tol || dz.amax() < 1e-5 {
                     break;
                 }
             } else {
