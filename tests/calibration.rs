@@ -32,7 +32,8 @@ fn addbiomechanics_rmse_mm(dir: &Path) -> f64 {
     for t in ["DJ1", "DJ4", "DJ5", "walking2", "walking3", "walking4"] {
         let text = std::fs::read_to_string(dir.join(format!("{t}_ik_per_marker_error_report.csv"))).expect("report");
         for line in text.lines().skip(2) {
-            let e: Vec<f64> = line.split(',').skip(1).filter_map(|v| v.trim().parse().ok()).filter(|v| *v > 0.0).collect();
+            let e: Vec<f64> =
+                line.split(',').skip(1).filter_map(|v| v.trim().parse().ok()).filter(|v| *v > 0.0).collect();
             if !e.is_empty() {
                 all.push((e.iter().map(|v| v * v).sum::<f64>() / e.len() as f64).sqrt() * 1e3);
             }
@@ -78,8 +79,7 @@ fn opencap_generic_model_fits_better_than_addbiomechanics_with_plausible_scales(
         assert_plausible(&cal, label);
         assert!(cal.registered > 40, "{label}: {} markers registered", cal.registered);
         let ctx = placed.expect("registration moved the markers");
-        let results: Vec<_> =
-            trials.iter().map(|(n, t)| solve_trial(&ctx, n, t, &cal, 2).expect("solves")).collect();
+        let results: Vec<_> = trials.iter().map(|(n, t)| solve_trial(&ctx, n, t, &cal, 2).expect("solves")).collect();
         let ours = pooled_rmse_mm(&results);
         eprintln!(
             "{label}: pooled marker RMSE {ours:.2} mm (AddBiomechanics {addb:.2}), stature {:.3} m, calibration {:.2} s",
@@ -95,13 +95,7 @@ fn opencap_generic_model_fits_better_than_addbiomechanics_with_plausible_scales(
 
 /// The scaled `.osim` and the `.mot` written for a trial, read back, give the marker RMSE the
 /// report gives (over the IK setup's markers, frames the report counts).
-fn reimported_rmse_mm(
-    scaled: &Path,
-    mot: &Path,
-    ik_setup: &Path,
-    trial_path: &Path,
-    solved: &[bool],
-) -> f64 {
+fn reimported_rmse_mm(scaled: &Path, mot: &Path, ik_setup: &Path, trial_path: &Path, solved: &[bool]) -> f64 {
     let mut ctx = Context::from_files_with_markers(scaled, None, None).expect("scaled model reads");
     ctx.apply_ik_setup(&smocap::io::osim::read_ik_setup(ik_setup).expect("ik setup")).expect("applies");
     let (trial, _) = read_trial(&ctx, trial_path, &InputOptions::default()).expect("trial");
@@ -141,7 +135,9 @@ fn reimported_rmse_mm(
 
 #[test]
 fn exported_scaled_model_and_motion_reproduce_the_reported_fit_and_beat_opensim() {
-    let cases: [(&str, &str, Option<&str>, &str, &str, &str, &str); 2] = [
+    // (dataset, model, marker set, Scale setup, static trial, IK setup, motion trial)
+    type Case<'a> = (&'a str, &'a str, Option<&'a str>, &'a str, &'a str, &'a str, &'a str);
+    let cases: [Case; 2] = [
         (
             "gait2354_subject01",
             "gait2354_simbody.osim",
@@ -195,7 +191,9 @@ fn exported_scaled_model_and_motion_reproduce_the_reported_fit_and_beat_opensim(
         // OpenSim 4.6's own Scale + IK on the same files (../shared/reference).
         let opensim = std::fs::read_dir(shared(&format!("reference/opensim-4.6/{name}")))
             .ok()
-            .and_then(|d| d.filter_map(|e| e.ok().map(|e| e.path())).find(|p| p.to_string_lossy().ends_with("_summary.json")))
+            .and_then(|d| {
+                d.filter_map(|e| e.ok().map(|e| e.path())).find(|p| p.to_string_lossy().ends_with("_summary.json"))
+            })
             .and_then(|p| std::fs::read_to_string(p).ok())
             .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
             .and_then(|v| v["rms_mean_m"].as_f64())
@@ -244,10 +242,17 @@ fn registration_recovers_misplaced_tracking_markers_within_5_mm() {
     let y = ctx.proxy.state(&s.truth.proxies[0]);
     for (m, o_true) in moved {
         let b = ctx.model.markers[m].body;
-        let sc = nalgebra::Vector3::new(y[ctx.model.scale_index(b, 0)], y[ctx.model.scale_index(b, 1)], y[ctx.model.scale_index(b, 2)]);
+        let sc = nalgebra::Vector3::new(
+            y[ctx.model.scale_index(b, 0)],
+            y[ctx.model.scale_index(b, 1)],
+            y[ctx.model.scale_index(b, 2)],
+        );
         let err_mm = (offsets[m] - o_true).component_mul(&sc).norm() * 1e3;
         let was_mm = (ctx.model.markers[m].offset - o_true).component_mul(&sc).norm() * 1e3;
-        eprintln!("{}: registered within {err_mm:.2} mm of the truth (model: {was_mm:.1} mm off)", ctx.model.markers[m].name);
+        eprintln!(
+            "{}: registered within {err_mm:.2} mm of the truth (model: {was_mm:.1} mm off)",
+            ctx.model.markers[m].name
+        );
         assert!(err_mm < 5.0, "{}: {err_mm:.2} mm from the truth", ctx.model.markers[m].name);
     }
 }

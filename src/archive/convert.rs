@@ -294,7 +294,8 @@ fn subject(
     } else {
         let s: Vec<(&str, &crate::io::MarkerTrial)> = statics.iter().map(|(n, t)| (n.as_str(), t)).collect();
         let m: Vec<(&str, &crate::io::MarkerTrial)> = motions.iter().map(|(n, t)| (n.as_str(), t)).collect();
-        crate::pipeline::subject::calibrate_placed_with(&sub.ctx, &s, &m).map_err(|e| format!("calibration failed: {e}"))
+        crate::pipeline::subject::calibrate_placed_with(&sub.ctx, &s, &m)
+            .map_err(|e| format!("calibration failed: {e}"))
     };
     drop((statics, motions));
     let cal = match cal {

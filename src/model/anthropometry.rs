@@ -33,7 +33,9 @@ pub enum AnthropometryError {
     Parse { path: String, message: String },
     #[error("cannot read {path}: {source}")]
     Io { path: String, source: std::io::Error },
-    #[error("{path}: dimension '{dimension}' names survey measurement '{name}', which the survey lacks (it has: {valid})")]
+    #[error(
+        "{path}: dimension '{dimension}' names survey measurement '{name}', which the survey lacks (it has: {valid})"
+    )]
     UnknownMeasurement { path: String, dimension: String, name: String, valid: String },
     #[error("{path}: dimension '{dimension}' names body or marker '{body}', which the model lacks")]
     UnknownBody { path: String, dimension: String, body: String },
@@ -130,8 +132,8 @@ impl Survey {
     }
 
     pub fn parse(text: &str, path: &str) -> Result<Survey, AnthropometryError> {
-        let f: SurveyFile =
-            toml::from_str(text).map_err(|e| AnthropometryError::Parse { path: path.into(), message: e.to_string() })?;
+        let f: SurveyFile = toml::from_str(text)
+            .map_err(|e| AnthropometryError::Parse { path: path.into(), message: e.to_string() })?;
         let k = f.columns.len();
         let pop = |p: &Population| -> Result<(DVector<f64>, DMatrix<f64>), AnthropometryError> {
             if p.mean.len() != k || p.covariance.len() != k || p.covariance.iter().any(|r| r.len() != k) {
@@ -340,7 +342,13 @@ pub fn resolve(
                     })
                 })
                 .collect::<Result<Vec<_>, _>>()?;
-            Ok(Dimension { name: d.name.clone(), survey: survey_cols, a: point(d, &d.a)?, b: point(d, &d.b)?, along: d.along })
+            Ok(Dimension {
+                name: d.name.clone(),
+                survey: survey_cols,
+                a: point(d, &d.a)?,
+                b: point(d, &d.b)?,
+                along: d.along,
+            })
         })
         .collect()
 }

@@ -148,7 +148,9 @@ pub fn marker_classes(model: &Model, tracking: &[String], anatomical: &[String])
                 return c;
             }
             let cluster = none_flagged
-                && numbered[i].as_ref().is_some_and(|s| numbered.iter().enumerate().any(|(j, t)| j != i && t.as_ref() == Some(s)));
+                && numbered[i]
+                    .as_ref()
+                    .is_some_and(|s| numbered.iter().enumerate().any(|(j, t)| j != i && t.as_ref() == Some(s)));
             if cluster {
                 MarkerClass::Tracking
             } else {

@@ -21,7 +21,9 @@ use crate::model::proxy::ProxyKind;
 use crate::model::MarkerClass;
 use crate::solve::calibrate::{finish, initial_state_weighted, track, JointProblem};
 use crate::solve::placement::place_markers;
-use crate::solve::prior::{measure, Anisotropy, Anthropometric, GlobalTerm, OffsetPrior, PriorReport, ScaleReport, ScaleToward};
+use crate::solve::prior::{
+    measure, Anisotropy, Anthropometric, GlobalTerm, OffsetPrior, PriorReport, ScaleReport, ScaleToward,
+};
 use crate::solve::{make_qp, Calibration, FrameSolver};
 use nalgebra::{DVector, Vector3};
 
@@ -81,7 +83,10 @@ fn priors(ctx: &Context, scale: &[usize], noise_m: f64) -> Result<Priors, TrialE
             cov[(d, d)] += 0.01f64.powi(2);
         }
         let sd: Vec<f64> = (0..dims.len()).map(|d| cov[(d, d)].sqrt()).collect();
-        let cov_inv = cov.clone().try_inverse().unwrap_or_else(|| nalgebra::DMatrix::from_diagonal(&cov.map_diagonal(|v| 1.0 / v)));
+        let cov_inv = cov
+            .clone()
+            .try_inverse()
+            .unwrap_or_else(|| nalgebra::DMatrix::from_diagonal(&cov.map_diagonal(|v| 1.0 / v)));
         stature_dim = dims.iter().position(|d| d.name == lm.stature_from);
         if let Some(i) = stature_dim {
             stat_ratio = stature_ratio(&survey, &dims[i], ctx.subject.sex);
@@ -148,7 +153,8 @@ fn governing(a: &Anthropometric, p: &[f64], scale: &[usize]) -> Vec<Option<usize
             let up = a.measure(&q);
             q[k] = v;
             let sens: Vec<f64> = up.iter().zip(&base).map(|(u, b)| ((u - b) / b).abs() / 0.01).collect();
-            let (best, s) = sens.iter().copied().enumerate().fold((0, 0.0), |m, (i, s)| if s > m.1 { (i, s) } else { m });
+            let (best, s) =
+                sens.iter().copied().enumerate().fold((0, 0.0), |m, (i, s)| if s > m.1 { (i, s) } else { m });
             (s > 0.2).then_some(best)
         })
         .collect()
@@ -202,8 +208,7 @@ pub fn calibrate_subject_with(
             .zip(all)
             .zip(&classes)
             .map(|((m, &w), c)| {
-                if (placing && any_fixed && !m.fixed)
-                    || (registering && anatomical >= 6 && *c == MarkerClass::Tracking)
+                if (placing && any_fixed && !m.fixed) || (registering && anatomical >= 6 && *c == MarkerClass::Tracking)
                 {
                     0.0
                 } else {
@@ -231,7 +236,8 @@ pub fn calibrate_subject_with(
     let mut kinds: Vec<Kind> = Vec::new();
     let inputs = statics.iter().map(|t| (t, Kind::Static)).chain(motions.iter().map(|t| (t, Kind::Motion)));
     for ((name, t), kind) in inputs {
-        let wanted = if kind == Kind::Static { settings.calibration_frames } else { settings.calibration_frames_motion };
+        let wanted =
+            if kind == Kind::Static { settings.calibration_frames } else { settings.calibration_frames_motion };
         let count = if kind == Kind::Static { statics.len() } else { motions.len() };
         let per_trial = wanted.div_ceil(count.max(1));
         let map = match_markers(ctx, name, t)?.columns;
@@ -266,13 +272,18 @@ pub fn calibrate_subject_with(
     let slices: Vec<&[f64]> = pooled.chunks(stride).collect();
     let w_first: Vec<&[f64]> = kinds.iter().map(|&k| first_w(k).as_slice()).collect();
     let w_all: Vec<&[f64]> = kinds.iter().map(|&k| all_w(k).as_slice()).collect();
-    let template =
-        FrameProblem { observed: &[], marker_weights: &first_motion, tracking_ref: &coord_ref, tracking_weights: &coord_w };
+    let template = FrameProblem {
+        observed: &[],
+        marker_weights: &first_motion,
+        tracking_ref: &coord_ref,
+        tracking_weights: &coord_w,
+    };
     let generic: Vec<Vector3<f64>> = ctx.model.markers.iter().map(|m| m.offset).collect();
     let none = vec![false; nm];
     // Stage 1: scales and poses on the first-stage markers.
     let mut state = initial_state_weighted(&mut solver, &slices, &w_first, &template, &p0, &starts);
-    let terms: Vec<&dyn GlobalTerm> = pri.terms.iter().map(|t| t.as_ref()).chain(pri.anthro.as_ref().map(|a| a as &dyn GlobalTerm)).collect();
+    let terms: Vec<&dyn GlobalTerm> =
+        pri.terms.iter().map(|t| t.as_ref()).chain(pri.anthro.as_ref().map(|a| a as &dyn GlobalTerm)).collect();
     let stage1 = JointProblem {
         model: &ctx.model,
         proxy: &ctx.proxy,
@@ -294,7 +305,8 @@ pub fn calibrate_subject_with(
     // millimetre) outweigh the survey, noisy motion data lean on it more.
     let noise = out.rmse_m.clamp(0.0005, 0.03);
     let pri = priors(ctx, &scale, if out.rmse_m.is_finite() { noise } else { settings.prior_noise_sd_m })?;
-    let terms: Vec<&dyn GlobalTerm> = pri.terms.iter().map(|t| t.as_ref()).chain(pri.anthro.as_ref().map(|a| a as &dyn GlobalTerm)).collect();
+    let terms: Vec<&dyn GlobalTerm> =
+        pri.terms.iter().map(|t| t.as_ref()).chain(pri.anthro.as_ref().map(|a| a as &dyn GlobalTerm)).collect();
     let stage1 = JointProblem { terms: &terms, ..stage1 };
     if !registering {
         out = stage1.solve(&mut state);
@@ -303,7 +315,7 @@ pub fn calibrate_subject_with(
     let mut offsets = None;
     let mut registered = 0;
     // Frames that placement and registration initialise offsets from: the static ones if any.
-    let place_on: Vec<usize> = match kinds.iter().any(|k| *k == Kind::Static) {
+    let place_on: Vec<usize> = match kinds.contains(&Kind::Static) {
         true => (0..kinds.len()).filter(|&i| kinds[i] == Kind::Static).collect(),
         false => (0..kinds.len()).collect(),
     };
@@ -373,7 +385,8 @@ fn prior_report(ctx: &Context, pri: &Priors, scale: &[usize], cal: &Calibration)
             let px = &ctx.proxy.proxies[k];
             let v = p[k];
             let width = (px.range.1 - px.range.0).abs();
-            let at_bound = (v - px.range.0).abs() < 1e-3 * width.max(1e-9) || (px.range.1 - v).abs() < 1e-3 * width.max(1e-9);
+            let at_bound =
+                (v - px.range.0).abs() < 1e-3 * width.max(1e-9) || (px.range.1 - v).abs() < 1e-3 * width.max(1e-9);
             let (z, dimension) = match (gov, &pri.anthro) {
                 (Some(d), Some(a)) => ((values[*d] - a.mean[*d]) / a.sd[*d], Some(a.dims[*d].name.clone())),
                 _ => ((v - pri.ratio) / ctx.settings.scale_prior_sd, None),
@@ -438,11 +451,18 @@ fn units_check(
     if (0.2..=5.0).contains(&r) {
         return Ok(());
     }
-    let hint = [(1000.0f64, "millimetres read as metres"), (100.0, "centimetres read as metres"), (10.0, "millimetres read as centimetres"), (0.1, "centimetres read as millimetres"), (0.01, "metres read as centimetres"), (0.001, "metres read as millimetres")]
-        .iter()
-        .min_by(|a, b| (r.ln() - a.0.ln()).abs().total_cmp(&(r.ln() - b.0.ln()).abs()))
-        .map(|h| h.1)
-        .unwrap_or("wrong units");
+    let hint = [
+        (1000.0f64, "millimetres read as metres"),
+        (100.0, "centimetres read as metres"),
+        (10.0, "millimetres read as centimetres"),
+        (0.1, "centimetres read as millimetres"),
+        (0.01, "metres read as centimetres"),
+        (0.001, "metres read as millimetres"),
+    ]
+    .iter()
+    .min_by(|a, b| (r.ln() - a.0.ln()).abs().total_cmp(&(r.ln() - b.0.ln()).abs()))
+    .map(|h| h.1)
+    .unwrap_or("wrong units");
     Err(TrialError::Implausible {
         trial: name.into(),
         message: format!(

@@ -170,7 +170,9 @@ pub fn conform_trial(ctx: &Context, trial: &mut MarkerTrial, opt: &InputOptions)
     let data_up = if let Some(a) = opt.up {
         out.up_source = "command line".into();
         // A confident detection (the fits agree within 15°) that says otherwise is worth a word.
-        if let Some(d) = fit.as_ref().and_then(|f| f.up_of(&model_up)).and_then(|u| nearest_axis(&u, 15f64.to_radians())) {
+        if let Some(d) =
+            fit.as_ref().and_then(|f| f.up_of(&model_up)).and_then(|u| nearest_axis(&u, 15f64.to_radians()))
+        {
             if (d - a.vector()).norm() > 1e-9 {
                 out.notes.push(format!(
                     "warning: --up {} contradicts the up axis the rigid fits detect ({}); check the data's axes",

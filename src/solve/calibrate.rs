@@ -65,10 +65,7 @@ impl Calibration {
             out.push("the calibration is not finite".to_string());
         }
         for s in self.prior.scales.iter().filter(|s| s.at_bound) {
-            out.push(format!(
-                "scale {} = {:.3} is at its bound [{}, {}]",
-                s.name, s.value, s.range.0, s.range.1
-            ));
+            out.push(format!("scale {} = {:.3} is at its bound [{}, {}]", s.name, s.value, s.range.0, s.range.1));
         }
         out
     }
@@ -77,7 +74,10 @@ impl Calibration {
     pub fn warnings(&self) -> Vec<String> {
         let mut out = self.suspect();
         for s in self.prior.scales.iter().filter(|s| s.z.abs() > 3.0) {
-            let of = s.dimension.as_deref().map_or("the stature-ratio prior".to_string(), |d| format!("its dimension '{d}'"));
+            let of = s
+                .dimension
+                .as_deref()
+                .map_or("the stature-ratio prior".to_string(), |d| format!("its dimension '{d}'"));
             out.push(format!("scale {} = {:.3} is {:.1} standard deviations from {of}", s.name, s.value, s.z));
         }
         out
@@ -235,9 +235,8 @@ impl JointProblem<'_> {
                 cpu::jacobian(&model, &eval.layout, &mut ws.kin);
                 let jm = eval.marker_jacobian(&ws);
                 // Rows of observed, weighted markers, scaled by √w.
-                let rows: Vec<usize> = (0..nm)
-                    .filter(|&m| mw[m] > 0.0 && obs[3 * m..3 * m + 3].iter().all(|v| !v.is_nan()))
-                    .collect();
+                let rows: Vec<usize> =
+                    (0..nm).filter(|&m| mw[m] > 0.0 && obs[3 * m..3 * m + 3].iter().all(|v| !v.is_nan())).collect();
                 let nr = 3 * rows.len();
                 let mut jq = DMatrix::zeros(nr, nq);
                 let mut js = DMatrix::zeros(nr, ns);

@@ -244,4 +244,3 @@ pub struct PriorReport {
     /// Survey dimensions `(name, value m, prior mean m, prior sd m)`.
     pub dimensions: Vec<(String, f64, f64, f64)>,
 }
-
