@@ -56,11 +56,11 @@ struct Priors {
     stature_ratio: f64,
 }
 
-/// The priors with their weights for marker noise `noise_m` (m).
-fn priors(ctx: &Context, scale: &[usize], noise_m: f64) -> Result<Priors, TrialError> {
+/// The priors with their weights for marker noise `noise_m` (m) and `frames` calibration frames.
+fn priors(ctx: &Context, scale: &[usize], noise_m: f64, frames: usize) -> Result<Priors, TrialError> {
     let s = &ctx.settings;
     let ns = scale.len();
-    let noise2 = noise_m.powi(2) * s.prior_frames;
+    let noise2 = noise_m.powi(2) * s.prior_fraction * frames as f64;
     let mut terms: Vec<Box<dyn GlobalTerm>> = Vec::new();
     let mut ratio = 1.0;
     let mut anthro = None;
@@ -225,7 +225,7 @@ pub fn calibrate_subject_with(
     let mut solver = FrameSolver::new(&eval, settings.clone(), make_qp(settings.qp));
     let np = ctx.proxy.np();
     let scale: Vec<usize> = (0..np).filter(|&k| ctx.proxy.proxies[k].kind == ProxyKind::Scale).collect();
-    let pri = priors(ctx, &scale, settings.prior_noise_sd_m)?;
+    let pri = priors(ctx, &scale, settings.prior_noise_sd_m, 0)?;
     let mut p0 = ctx.proxy.default_proxies();
     for &k in &scale {
         let (lo, hi) = ctx.proxy.proxies[k].range;
@@ -270,6 +270,7 @@ pub fn calibrate_subject_with(
         return Err(TrialError::NothingToCalibrate { trial, min: settings.min_markers });
     }
     let slices: Vec<&[f64]> = pooled.chunks(stride).collect();
+    let pri = priors(ctx, &scale, settings.prior_noise_sd_m, slices.len())?;
     let w_first: Vec<&[f64]> = kinds.iter().map(|&k| first_w(k).as_slice()).collect();
     let w_all: Vec<&[f64]> = kinds.iter().map(|&k| all_w(k).as_slice()).collect();
     let template = FrameProblem {
@@ -304,7 +305,8 @@ pub fn calibrate_subject_with(
     // capture resolves) rather than a fixed one: clean data (a static trial, noise of a
     // millimetre) outweigh the survey, noisy motion data lean on it more.
     let noise = out.rmse_m.clamp(0.0005, 0.03);
-    let pri = priors(ctx, &scale, if out.rmse_m.is_finite() { noise } else { settings.prior_noise_sd_m })?;
+    let pri =
+        priors(ctx, &scale, if out.rmse_m.is_finite() { noise } else { settings.prior_noise_sd_m }, slices.len())?;
     let terms: Vec<&dyn GlobalTerm> =
         pri.terms.iter().map(|t| t.as_ref()).chain(pri.anthro.as_ref().map(|a| a as &dyn GlobalTerm)).collect();
     let stage1 = JointProblem { terms: &terms, ..stage1 };

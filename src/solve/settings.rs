@@ -130,17 +130,18 @@ pub struct SolverSettings {
     /// 0.01. The offset priors of registration use it as it is; the scale priors use it for the
     /// first stage, then the marker RMSE that stage reaches (within 2–30 mm: empirical Bayes).
     pub prior_noise_sd_m: f64,
-    /// How many frames of evidence one standard deviation of a subject-level prior on the
-    /// scales (anthropometric, stature ratio, anisotropy) is worth: its energy is this times
-    /// what one marker missed by `prior_noise_sd_m` in one frame costs. Default 10: the frames of
-    /// a motion are far from independent observations (skin motion and model error repeat from
-    /// frame to frame), so a weight of 1 would let ~50 calibration frames outvote the survey
-    /// fifty-fold. On the OpenCap/AddBiomechanics subject (docs/CALIBRATION.md), 1 gives a 1.81 m
-    /// stature (true: 1.84 m) and an upper arm 3.3 σ long; 10 gives 1.84 m, every scale within
-    /// 2.4 σ, for +0.3 mm RMSE.
-    pub prior_frames: f64,
+    /// Weight of the subject-level priors on the scales (anthropometric, stature ratio,
+    /// anisotropy) relative to the calibration data: one standard deviation costs what
+    /// `prior_fraction × (calibration frames)` frames with one marker missed by the data's noise
+    /// cost, so the priors' say does not depend on how many frames calibration picks. Default 0.1:
+    /// the frames of a motion are far from independent observations (skin motion and model error
+    /// repeat from frame to frame). Measured (docs/CALIBRATION.md): on the OpenCap/AddBiomechanics
+    /// subject (96 motion frames) ~0.01 leaves an upper arm 3.3 σ long and a 1.81 m stature (true
+    /// 1.84 m), 0.1 gives every scale within 2.7 σ; on the synthetic audit (20 static frames, scales
+    /// drawn independently, not in human proportions) 0.5 raised the scale error from 4.6 to 4.8 mm.
+    pub prior_fraction: f64,
     /// Weight of the anthropometric prior (ANSUR II dimensions conditioned on the subject's
-    /// sex, height and mass), relative to `prior_frames`; 0 disables it. Default 1.
+    /// sex, height and mass), relative to `prior_fraction`; 0 disables it. Default 1.
     pub anthropometric_weight: f64,
     /// Standard deviation (dimensionless) of a scale factor of a body no survey dimension
     /// measures, about the subject's stature ratio to the generic model. Default 0.1.
@@ -184,7 +185,7 @@ impl Default for SolverSettings {
             registration_tracking_sd_m: 0.1,
             registration_bound_m: 0.2,
             prior_noise_sd_m: 0.01,
-            prior_frames: 10.0,
+            prior_fraction: 0.1,
             anthropometric_weight: 1.0,
             scale_prior_sd: 0.1,
             anisotropy_sd: 0.05,
