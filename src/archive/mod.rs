@@ -8,6 +8,7 @@ pub mod discover;
 pub mod export;
 pub mod inspect;
 pub mod mcap_out;
+pub mod proto;
 pub mod merge;
 pub mod progress;
 pub mod schemas;
