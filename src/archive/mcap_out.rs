@@ -59,7 +59,7 @@ pub const DEFAULT_EPOCH_NS: u64 = 946_684_800 * 1_000_000_000;
 
 /// The chunks' zstd level: chosen by measurement (BENCHMARKS.md, "convert: writer"); higher
 /// levels gained < 3 % in size for several times the compression time.
-pub const DEFAULT_ZSTD_LEVEL: u32 = 5;
+pub const DEFAULT_ZSTD_LEVEL: u32 = 1;
 
 /// The scaled model's attachment name (zstd-compressed `.osim` text).
 pub const SCALED_MODEL_ATTACHMENT: &str = "scaled_model.osim.zst";
@@ -73,11 +73,14 @@ pub struct WriterOptions {
     pub zstd_level: u32,
     /// Uncompressed chunk size (bytes).
     pub chunk_size: u64,
+    /// Record each frame's wall-clock solve time (`SolverStats.solve_s`); off, files of the
+    /// same input are byte-identical across runs (the summary keeps per-trial timings).
+    pub timings: bool,
 }
 
 impl Default for WriterOptions {
     fn default() -> Self {
-        WriterOptions { epoch_ns: DEFAULT_EPOCH_NS, zstd_level: DEFAULT_ZSTD_LEVEL, chunk_size: 1 << 20 }
+        WriterOptions { epoch_ns: DEFAULT_EPOCH_NS, zstd_level: DEFAULT_ZSTD_LEVEL, chunk_size: 1 << 20, timings: false }
     }
 }
 
@@ -129,7 +132,7 @@ fn quat(r: &UnitQuaternion<f64>) -> proto::Quaternion {
     proto::Quaternion { x: grid(s * r.i), y: grid(s * r.j), z: grid(s * r.k), w: grid(s * r.w) }
 }
 
-/// The grid `/tf` values are rounded to: 2⁻¹⁷ (≈ 8 µm, ≈ 8 µrad ≈ 0.0004°). A viewer needs no more, and
+/// The grid `/tf` values are rounded to: 2⁻¹⁵ (≈ 30 µm, ≈ 30 µrad ≈ 0.002°). A viewer needs no more, and
 /// the zero low bits of the doubles compress.
 pub const TF_GRID: f64 = 1.0 / (1u64 << 15) as f64;
 
@@ -197,6 +200,7 @@ pub struct TrialWriter<'a> {
     calibrated_proxies: Vec<f64>,
     t0: f64,
     epoch_ns: u64,
+    timings: bool,
     /// Message buffers, refilled each frame (their strings and vectors keep their capacity).
     tf: proto::FrameTransforms,
     cloud: proto::PointCloud,
@@ -239,7 +243,8 @@ impl<'a> TrialWriter<'a> {
             parent_frame_id: "world".into(),
             child_frame_id: "model".into(),
             translation: Some(proto::Vector3::default()),
-            rotation: Some(quat(&root)),
+            // Exact: constant, so it costs nothing after compression.
+            rotation: Some(proto::Quaternion { x: root.i + 0.0, y: root.j + 0.0, z: root.k + 0.0, w: root.w }),
         }];
         transforms.extend(model.bodies.iter().enumerate().map(|(b, body)| proto::FrameTransform {
             timestamp: Some(Timestamp::default()),
@@ -272,6 +277,7 @@ impl<'a> TrialWriter<'a> {
             dphi: vec![0.0; ctx.proxy.terms.len()],
             t0: trial.times.first().copied().unwrap_or(0.0),
             epoch_ns: opt.epoch_ns,
+            timings: opt.timings,
             tf: proto::FrameTransforms { transforms },
             cloud,
             state: proto::State {
@@ -474,7 +480,7 @@ impl<'a> TrialWriter<'a> {
             energy: nan_if_infinite(s.energy),
             rmse: nan_if_infinite(s.rmse_m),
             markers_used: s.markers_used as u32,
-            solve_s: fr.seconds as f32,
+            solve_s: if self.timings { fr.seconds as f32 } else { 0.0 },
             status: status_code(s.status),
             bridged: fr.bridged,
             marker_rmse: if n > 0 { (sq / n as f64).sqrt() } else { f64::NAN },

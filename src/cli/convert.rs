@@ -51,6 +51,10 @@ pub struct ConvertArgs {
     #[arg(long, default_value_t = crate::archive::mcap_out::DEFAULT_ZSTD_LEVEL,
         value_parser = clap::value_parser!(u32).range(1..=22))]
     pub zstd_level: u32,
+    /// Record each frame's wall-clock solve time in `/smocap/stats` (`solve_s`); without it
+    /// the files of the same input are byte-identical across runs.
+    #[arg(long)]
+    pub timings: bool,
 }
 
 fn parse_epoch(s: &str) -> Result<u64, String> {
@@ -70,7 +74,12 @@ pub fn run(a: ConvertArgs) -> anyhow::Result<u8> {
         shard,
         resume: a.resume,
         progress: Some(progress.clone()),
-        writer: WriterOptions { epoch_ns: a.epoch, zstd_level: a.zstd_level, ..WriterOptions::default() },
+        writer: WriterOptions {
+            epoch_ns: a.epoch,
+            zstd_level: a.zstd_level,
+            timings: a.timings,
+            ..WriterOptions::default()
+        },
     };
     let every = Duration::try_from_secs_f64(a.progress_every).context("--progress-every: seconds expected")?;
     let display = Display::start(progress, Mode::auto(a.quiet, every));
