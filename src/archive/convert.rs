@@ -239,7 +239,7 @@ fn subject(
     let mut todo = Vec::new();
     for t in &g.trials {
         let out = output_path(&opt.out, &d.name, &t.rel);
-        let hash = std::fs::read(&t.path).map(|b| super::sha256_hex(&b));
+        let hash = super::sha256_file(&t.path);
         match hash {
             Err(e) => outcomes.push(failed(d, g, t, &out, format!("{}: {e}", t.path.display()))),
             Ok(h) if opt.resume && out.is_file() && recorded_input_hash(&out).as_deref() == Some(h.as_str()) => {
