@@ -1,149 +1,182 @@
 #!/usr/bin/env python3
-"""Checks MCAP files written by `smocap convert` with the official Python MCAP reader.
+"""Checks MCAP files written by `smocap convert` with the official Python MCAP readers.
 
-For each file (or every *.mcap under a folder given): lists the channels with their schemas,
-decodes every message (json.loads), checks that each channel's messages validate against the
-JSON Schema stored in the file, that /smocap/state has one message per frame (the `frames` of
-the smocap.run metadata record) and the same count as every other channel, that /tf and /scene
-carry Foxglove's well-known schema names (foxglove.FrameTransforms, foxglove.SceneUpdate), and,
-with --foxglove-schemas, that their messages validate against Foxglove's official JSON Schemas.
-Exits 1 when any check fails.
+For each file (or every *.mcap under a folder given): lists the channels with their schemas;
+checks that every channel is protobuf with a descriptor set as its schema and the expected
+schema name (Foxglove's well-known names for /tf, /markers, /scene); decodes every message with
+mcap-protobuf-support from the file's own descriptors; checks one message per frame on the
+per-frame channels (the `frames` of the smocap.run metadata record) and one on /scene and
+/smocap/subject; that the arrays agree with /smocap/subject (coordinates, marker points); that
+every /tf message forms one tree rooted at `world`; and, with the `foxglove-schemas-protobuf`
+package installed, that every Foxglove message of the file's descriptors matches Foxglove's
+official descriptor field by field (name, number, type, label, message type) and that every
+Foxglove message parses with the official class without unknown fields. Exits 1 when any check
+fails.
 
 Setup (outside the repository):
 
-    python3 -m venv /tmp/mcap-venv && /tmp/mcap-venv/bin/pip install mcap jsonschema
-    # Foxglove's official JSON Schemas ship in the npm package @foxglove/schemas:
-    (cd /tmp && npm pack @foxglove/schemas@2 && tar xzf foxglove-schemas-*.tgz)
-    /tmp/mcap-venv/bin/python scripts/check_mcap.py smocap-out --foxglove-schemas /tmp/package
-
---foxglove-schemas takes the unpacked npm package (read through `node`), or a folder of
-<Name>.json files (e.g. foxglove-sdk's schemas/jsonschema).
+    python3 -m venv /tmp/mcap-venv
+    /tmp/mcap-venv/bin/pip install mcap mcap-protobuf-support foxglove-schemas-protobuf numpy
+    /tmp/mcap-venv/bin/python scripts/check_mcap.py smocap-out
 """
 
 import argparse
-import json
+import importlib
 import pathlib
-import subprocess
 import sys
 
 from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
+from google.protobuf import descriptor_pb2, descriptor_pool
 
 try:
-    import jsonschema
-except ImportError:  # schema validation is skipped with a note
-    jsonschema = None
+    from google.protobuf.unknown_fields import UnknownFieldSet
+except ImportError:  # older protobuf
+    UnknownFieldSet = None
 
-FOXGLOVE = {"/tf": "foxglove.FrameTransforms", "/scene": "foxglove.SceneUpdate"}
-OURS = {"/smocap/state": "smocap.State", "/smocap/residuals": "smocap.Residuals", "/smocap/stats": "smocap.SolverStats"}
-
-
-def official_schemas(path):
-    """Foxglove's JSON Schemas by full name (foxglove.X) from an npm package or a folder."""
-    p = pathlib.Path(path)
-    names = [n.split(".", 1)[1] for n in FOXGLOVE.values()]
-    if (p / "package.json").is_file():
-        js = "const s=require(%s);console.log(JSON.stringify({%s}))" % (
-            json.dumps(str((p / "dist" / "jsonschema" / "index.js").resolve())),
-            ",".join(f"{n}:s.{n}" for n in names),
-        )
-        got = json.loads(subprocess.run(["node", "-e", js], check=True, capture_output=True, text=True).stdout)
-    else:
-        got = {n: json.loads((p / f"{n}.json").read_text()) for n in names}
-    return {f"foxglove.{n}": validator(s) for n, s in got.items()}
+PER_FRAME = {
+    "/smocap/state": "smocap.State",
+    "/smocap/stats": "smocap.SolverStats",
+    "/tf": "foxglove.FrameTransforms",
+    "/markers": "foxglove.PointCloud",
+}
+ONCE = {"/scene": "foxglove.SceneUpdate", "/smocap/subject": "smocap.Subject"}
 
 
-def validator(schema):
-    cls = jsonschema.validators.validator_for(schema)
-    return cls(schema)
+def official_class(full_name):
+    """The class of foxglove-schemas-protobuf for `foxglove.X`, or None when not installed."""
+    name = full_name.split(".", 1)[1]
+    try:
+        return getattr(importlib.import_module(f"foxglove_schemas_protobuf.{name}_pb2"), name)
+    except ImportError:
+        return None
 
 
-def check(path, official, every):
+def compare_descriptors(ours, official, seen, errors):
+    """Every field of `ours` (and of the foxglove messages it uses) as in `official`."""
+    if ours.full_name in seen:
+        return
+    seen.add(ours.full_name)
+    theirs = {f.name: f for f in official.fields}
+    for f in ours.fields:
+        o = theirs.get(f.name)
+        if o is None:
+            errors.append(f"{ours.full_name}.{f.name}: not in Foxglove's schema")
+            continue
+        mine = (f.number, f.type, f.is_repeated, f.message_type.full_name if f.message_type else None)
+        want = (o.number, o.type, o.is_repeated, o.message_type.full_name if o.message_type else None)
+        if mine != want:
+            errors.append(f"{ours.full_name}.{f.name}: (number, type, repeated, message) {mine}, Foxglove has {want}")
+        elif f.message_type and f.message_type.full_name.startswith("foxglove."):
+            compare_descriptors(f.message_type, o.message_type, seen, errors)
+    missing = sorted(set(theirs) - {f.name for f in ours.fields})
+    if missing:
+        errors.append(f"{ours.full_name}: Foxglove's fields {missing} are missing")
+
+
+def check_tree(msg, seq, errors):
+    parent = {}
+    for t in msg.transforms:
+        if t.child_frame_id in parent:
+            errors.append(f"/tf seq {seq}: frame {t.child_frame_id!r} has two parents")
+        parent[t.child_frame_id] = t.parent_frame_id
+    for child in parent:
+        f, hops = child, 0
+        while f in parent and hops <= len(parent):
+            f, hops = parent[f], hops + 1
+        if f != "world":
+            errors.append(f"/tf seq {seq}: frame {child!r} is not under 'world' (reaches {f!r})")
+            return
+
+
+def check(path, every):
     errors = []
     with open(path, "rb") as f:
-        reader = make_reader(f)
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
         summary = reader.get_summary()
         if summary is None:
             return [f"{path}: no summary section"]
         counts = summary.statistics.channel_message_counts if summary.statistics else {}
         print(f"{path}")
-        print(f"  {'topic':<20} {'schema':<26} {'encoding':<9} {'schema enc.':<11} {'messages':>8}")
-        own = {}
+        print(f"  {'topic':<18} {'schema':<26} {'encoding':<9} {'schema enc.':<11} {'messages':>8}")
+        topics = {}
         for cid, ch in sorted(summary.channels.items()):
             sc = summary.schemas.get(ch.schema_id)
             name = sc.name if sc else ""
-            print(f"  {ch.topic:<20} {name:<26} {ch.message_encoding:<9} {sc.encoding if sc else '':<11} {counts.get(cid, 0):>8}")
-            want = FOXGLOVE.get(ch.topic) or OURS.get(ch.topic)
+            topics[ch.topic] = (name, sc)
+            print(f"  {ch.topic:<18} {name:<26} {ch.message_encoding:<9} {sc.encoding if sc else '':<11} {counts.get(cid, 0):>8}")
+            want = PER_FRAME.get(ch.topic) or ONCE.get(ch.topic)
             if want and name != want:
                 errors.append(f"{ch.topic}: schema name {name!r}, expected {want!r}")
-            if ch.message_encoding != "json" or (sc and sc.encoding != "jsonschema"):
+            if ch.message_encoding != "protobuf" or (sc and sc.encoding != "protobuf"):
                 errors.append(f"{ch.topic}: encoding {ch.message_encoding}/{sc.encoding if sc else None}")
-            if sc and jsonschema:
-                own[ch.topic] = validator(json.loads(sc.data))
-        for t in list(FOXGLOVE) + list(OURS):
-            if t not in {c.topic for c in summary.channels.values()}:
+        for t in list(PER_FRAME) + list(ONCE):
+            if t not in topics:
                 errors.append(f"channel {t} missing")
-        meta = {}
-        for m in reader.iter_metadata():
-            meta[m.name] = m.metadata
+        # The file's Foxglove descriptors against the official ones.
+        seen_msgs = set()
+        for topic, (name, sc) in topics.items():
+            cls = official_class(name) if name.startswith("foxglove.") else None
+            if sc is None or cls is None:
+                continue
+            pool = descriptor_pool.DescriptorPool()
+            for fd in descriptor_pb2.FileDescriptorSet.FromString(sc.data).file:
+                pool.Add(fd)
+            compare_descriptors(pool.FindMessageTypeByName(name), cls.DESCRIPTOR, seen_msgs, errors)
+        meta = {m.name: m.metadata for m in reader.iter_metadata()}
         run = meta.get("smocap.run", {})
         frames = int(run["frames"]) if "frames" in run else None
-        decoded, seen, bad = 0, {}, {}
-        for _schema, channel, message in reader.iter_messages():
-            try:
-                v = json.loads(message.data)
-            except ValueError as e:
-                errors.append(f"{channel.topic} seq {message.sequence}: not JSON: {e}")
-                continue
+        decoded, seen, subject = 0, {}, None
+        for schema, channel, message, msg in reader.iter_decoded_messages(log_time_order=False):
             decoded += 1
             k = seen.get(channel.topic, 0)
             seen[channel.topic] = k + 1
+            if channel.topic == "/smocap/subject":
+                subject = msg
             if k % every:
                 continue
-            checks = [("file schema", own.get(channel.topic))]
-            if channel.topic in FOXGLOVE and FOXGLOVE[channel.topic] in official:
-                checks.append(("official schema", official[FOXGLOVE[channel.topic]]))
-            for what, val in checks:
-                if val is None:
-                    continue
-                err = next(iter(val.iter_errors(v)), None)
-                if err is not None and bad.get((channel.topic, what), 0) < 3:
-                    bad[(channel.topic, what)] = bad.get((channel.topic, what), 0) + 1
-                    where = "/".join(str(x) for x in err.absolute_path)
-                    errors.append(f"{channel.topic} seq {message.sequence}: {what}: {where}: {err.message[:200]}")
+            cls = official_class(schema.name) if schema.name.startswith("foxglove.") else None
+            if cls is not None:
+                o = cls.FromString(message.data)
+                if UnknownFieldSet is not None and len(UnknownFieldSet(o)):
+                    errors.append(f"{channel.topic} seq {message.sequence}: unknown fields for Foxglove's {schema.name}")
+            if channel.topic == "/tf":
+                check_tree(msg, message.sequence, errors)
+            if subject is not None and channel.topic == "/smocap/state" and len(msg.q) != len(subject.coordinates):
+                errors.append(f"/smocap/state seq {message.sequence}: {len(msg.q)} q for {len(subject.coordinates)} coordinates")
+            if subject is not None and channel.topic == "/markers" and len(msg.data) != 12 * len(subject.markers):
+                errors.append(f"/markers seq {message.sequence}: {len(msg.data)} bytes for {len(subject.markers)} markers")
         total = sum(counts.values())
-        print(f"  decoded {decoded} of {total} messages as JSON; smocap.run frames = {frames}")
+        size = pathlib.Path(path).stat().st_size
+        per = f"{size / frames:.0f} bytes/frame" if frames else ""
+        print(f"  decoded {decoded} of {total} messages; smocap.run frames = {frames}; {size} bytes, {per}")
         if decoded != total:
             errors.append(f"decoded {decoded} messages, the summary counts {total}")
-        n_state = seen.get("/smocap/state", 0)
         if frames is None:
             errors.append("no frames in the smocap.run metadata")
-        elif n_state != frames:
-            errors.append(f"{n_state} state messages for {frames} frames")
-        for t, n in seen.items():
-            if n != n_state:
-                errors.append(f"{t}: {n} messages, /smocap/state has {n_state}")
+        else:
+            for t in PER_FRAME:
+                if seen.get(t, 0) != frames:
+                    errors.append(f"{t}: {seen.get(t, 0)} messages for {frames} frames")
+        for t in ONCE:
+            if seen.get(t, 0) != 1:
+                errors.append(f"{t}: {seen.get(t, 0)} messages, expected 1")
     return [f"{path}: {e}" for e in errors]
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("paths", nargs="+", help="MCAP files, or folders searched for *.mcap")
-    ap.add_argument("--foxglove-schemas", help="unpacked npm @foxglove/schemas, or a folder of <Name>.json")
-    ap.add_argument("--every", type=int, default=1, help="validate every Nth message of a channel (default 1: all)")
+    ap.add_argument("--every", type=int, default=1, help="check every Nth message of a channel in depth (default 1: all)")
     a = ap.parse_args()
-    if a.foxglove_schemas and jsonschema is None:
-        ap.error("--foxglove-schemas needs the jsonschema package")
-    official = official_schemas(a.foxglove_schemas) if a.foxglove_schemas else {}
-    if jsonschema is None:
-        print("note: jsonschema not installed; messages are decoded but not validated", file=sys.stderr)
-    elif not official:
-        print("note: no --foxglove-schemas; /tf and /scene checked against the files' own schemas only", file=sys.stderr)
+    if official_class("foxglove.FrameTransforms") is None:
+        print("note: foxglove-schemas-protobuf not installed; not compared with Foxglove's schemas", file=sys.stderr)
     files = []
     for p in map(pathlib.Path, a.paths):
         files.extend(sorted(p.rglob("*.mcap")) if p.is_dir() else [p])
     errors = []
     for f in files:
-        errors.extend(check(f, official, max(1, a.every)))
+        errors.extend(check(f, max(1, a.every)))
     for e in errors:
         print(f"FAIL {e}", file=sys.stderr)
     print(f"{len(files)} files, {len(errors)} problems")

@@ -11,16 +11,27 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 struct Counting;
 static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
 
+thread_local! {
+    /// Whether this thread's allocations count (the test's own thread, not the harness's).
+    static COUNTED: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+fn count() {
+    if COUNTED.with(|c| c.get()) {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        count();
         unsafe { System.alloc(layout) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
         unsafe { System.dealloc(ptr, layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        count();
         unsafe { System.realloc(ptr, layout, new_size) }
     }
 }
@@ -28,8 +39,13 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
+/// The tests share the counter, so they run one at a time (each counts its own thread only).
+static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 #[test]
 fn solving_frames_allocates_nothing_once_warm() {
+    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    COUNTED.with(|c| c.set(true));
     let ctx = Context::shipped().unwrap();
     let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 40, seed: 2, ..SynthOptions::default() });
     let eval = ctx.evaluator();
@@ -52,4 +68,52 @@ fn solving_frames_allocates_nothing_once_warm() {
     let allocated = ALLOCATIONS.load(Ordering::Relaxed) - before;
     assert!(iterations >= 39);
     assert_eq!(allocated, 0, "{allocated} allocations in 39 frames");
+}
+
+/// Writing a solved frame to its MCAP file (kinematics, protobuf encoding of `/tf`, `/markers`,
+/// `/smocap/state`, `/smocap/stats`, the chunk's compression) allocates nothing of its own per
+/// frame: with the whole trial in one chunk, what remains is the MCAP writer's amortised growth
+/// of its chunk and index buffers (a few dozen reallocations in all; a new chunk adds a few
+/// dozen more, every ≈ 300 frames at the default 1 MiB).
+#[test]
+fn writing_frames_allocates_far_less_than_once_per_frame() {
+    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    COUNTED.with(|c| c.set(true));
+    use smocap::archive::mcap_out::{TrialNames, TrialWriter, WriterOptions};
+    use smocap::pipeline::SolvedFrame;
+    use smocap::solve::{Calibration, FrameStats, FrameStatus};
+    let ctx = Context::shipped().unwrap();
+    let n = 2000;
+    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: n, seed: 3, ..SynthOptions::default() });
+    let cal = Calibration {
+        proxies: s.truth.proxies[0].clone(),
+        frames: 1,
+        iterations: 1,
+        rmse_m: 0.0,
+        registered: 0,
+        seconds: 0.0,
+        prior: Default::default(),
+        frame_proxies: Vec::new(),
+        marker_offsets: None,
+    };
+    let dir = std::env::temp_dir().join(format!("smocap-alloc-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("t.mcap");
+    let names = TrialNames::default();
+    let opt = WriterOptions { chunk_size: 1 << 30, ..WriterOptions::default() };
+    let mut w = TrialWriter::create(&out, &ctx, "t", &s.trial, &cal, &names, &opt).unwrap();
+    let stats = FrameStats { iterations: 1, accepted: 1, energy: 1e-3, rmse_m: 2e-3, markers_used: 53, status: FrameStatus::Converged };
+    // The frames, made before counting (the solver hands them over as they are).
+    let frames: Vec<SolvedFrame> = (0..n)
+        .map(|f| SolvedFrame { index: f, proxies: s.truth.proxies[f].clone(), stats, seconds: 1e-4, bridged: false })
+        .collect();
+    w.frame(&frames[0]).unwrap(); // warm-up: message buffers reach their sizes
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    for f in &frames[1..] {
+        w.frame(f).unwrap();
+    }
+    let allocated = ALLOCATIONS.load(Ordering::Relaxed) - before;
+    drop(w);
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(allocated < 100, "{allocated} allocations in {} frames", n - 1);
 }

@@ -6,9 +6,8 @@
 //! message encoding and metadata; its schema's name, encoding and bytes; sequence, log time,
 //! publish time and data bytes), every metadata record (name and all key/value pairs) and every
 //! attachment (name, media type, log and create times, data bytes), and the header (profile,
-//! library). The one field excluded is the run's timing: `solve_s` (wall-clock seconds spent
-//! solving the frame) in each `/smocap/stats` message, which is compared with that key removed
-//! from its JSON. File bytes differ only through it (and the chunk compression that follows).
+//! library). Files are written without per-frame timings (no `--timings`), so the files are also
+//! compared byte for byte.
 
 use smocap::archive::config::SyntheticSpec;
 use std::path::{Path, PathBuf};
@@ -43,7 +42,7 @@ fn ends(p: &Path, suffix: &str) -> bool {
     p.to_string_lossy().ends_with(suffix)
 }
 
-/// What a file holds, in order, with `/smocap/stats`'s `solve_s` removed (see the module docs).
+/// What a file holds, in order (see the module docs).
 fn content(path: &Path) -> Vec<String> {
     let buf = std::fs::read(path).unwrap();
     let mut out = Vec::new();
@@ -51,12 +50,7 @@ fn content(path: &Path) -> Vec<String> {
         let m = m.unwrap();
         let c = &m.channel;
         let schema = c.schema.as_ref().map(|s| (s.name.clone(), s.encoding.clone(), s.data.to_vec()));
-        let mut data = m.data.to_vec();
-        if c.topic == "/smocap/stats" {
-            let mut v: serde_json::Value = serde_json::from_slice(&data).unwrap();
-            assert!(v.as_object_mut().unwrap().remove("solve_s").is_some());
-            data = v.to_string().into_bytes();
-        }
+        let data = m.data.to_vec();
         out.push(format!(
             "{} {} {:?} {:?} {} {} {} {:?}",
             c.topic, c.message_encoding, c.metadata, schema, m.sequence, m.log_time, m.publish_time, data
@@ -89,6 +83,7 @@ fn assert_same_content(a: &Path, b: &Path) {
     for (i, (x, y)) in ca.iter().zip(&cb).enumerate() {
         assert!(x == y, "{} vs {}: record {i} differs", a.display(), b.display());
     }
+    assert!(std::fs::read(a).unwrap() == std::fs::read(b).unwrap(), "{} vs {}: bytes differ", a.display(), b.display());
 }
 
 fn convert(toml: &Path, out: &Path, extra: &[&str]) -> Command {

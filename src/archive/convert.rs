@@ -5,7 +5,7 @@
 use super::config::Dataset;
 use super::discover::{discover, SubjectGroup, TrialEntry};
 use super::inspect::recorded_input_hash;
-use super::mcap_out::{partial_path, RunInfo};
+use super::mcap_out::{partial_path, RunInfo, WriterOptions};
 use super::shard::{assign, Shard};
 use super::trial_job::{read_for, solve_and_write, Calibrated};
 use crate::pipeline::convention::InputOptions;
@@ -26,6 +26,8 @@ pub struct ConvertOptions {
     pub resume: bool,
     /// Counters to update as trials and frames finish (for a progress display).
     pub progress: Option<std::sync::Arc<super::progress::Progress>>,
+    /// How each trial's file is written (epoch, compression).
+    pub writer: WriterOptions,
 }
 
 /// One trial's fate.
@@ -237,7 +239,7 @@ fn subject(
     let mut todo = Vec::new();
     for t in &g.trials {
         let out = output_path(&opt.out, &d.name, &t.rel);
-        let hash = std::fs::read(&t.path).map(|b| super::sha256_hex(&b));
+        let hash = super::sha256_file(&t.path);
         match hash {
             Err(e) => outcomes.push(failed(d, g, t, &out, format!("{}: {e}", t.path.display()))),
             Ok(h) if opt.resume && out.is_file() && recorded_input_hash(&out).as_deref() == Some(h.as_str()) => {
@@ -311,7 +313,7 @@ fn subject(
                 crate::io::osim::MassScaling { subject_mass: ctx.subject.mass_kg, ..Default::default() },
             )
             .ok()
-            .map(|(m, _)| m);
+            .and_then(|(m, _)| super::trial_job::compress_model(&m));
             let settings_json = serde_json::to_string_pretty(&ctx.settings).unwrap_or_default();
             Calibrated { base: sub.ctx, placed, calibration, settings_json, scaled_model }
         }
@@ -320,7 +322,7 @@ fn subject(
     let solved: Vec<TrialOutcome> = todo
         .par_iter()
         .map(|(t, out, hash)| {
-            let o = solve_one(d, g, t, out, hash, &input, &cal, opt.progress.as_deref());
+            let o = solve_one(d, g, t, out, hash, &input, &cal, &opt.writer, opt.progress.as_deref());
             report(&o);
             o
         })
@@ -338,6 +340,7 @@ fn solve_one(
     hash: &str,
     input: &InputOptions,
     cal: &Calibrated,
+    writer: &WriterOptions,
     progress: Option<&super::progress::Progress>,
 ) -> TrialOutcome {
     let fail = |e: String| failed(d, g, t, out, e);
@@ -369,7 +372,8 @@ fn solve_one(
     ] {
         run.insert(k.into(), v.into());
     }
-    match solve_and_write(out, &t.rel, &trial, cal, &run, progress.map(|p| &p.frames_done)) {
+    run.insert("epoch_ns".into(), writer.epoch_ns.to_string());
+    match solve_and_write(out, &t.rel, &trial, cal, &run, writer, progress.map(|p| &p.frames_done)) {
         Ok(s) => TrialOutcome {
             frames: s.frames,
             solve_s: s.solve_s,

@@ -1,10 +1,13 @@
-//! A converted trial back out of its MCAP file: the `/smocap/state` channel (with the frame's
-//! RMSE from `/smocap/residuals` and status from `/smocap/stats`) as an OpenSim motion (`.mot`,
+//! A converted trial back out of its MCAP file: the `/smocap/state` channel (named by
+//! `/smocap/subject`, with the frame's marker RMSE and status from `/smocap/stats`) as an OpenSim motion (`.mot`,
 //! the columns and degrees of `smocap solve --mot-dir`) or a CSV table.
 
 use crate::io::sto::{self, StoError};
 use crate::model::Model;
 use crate::pipeline::export::coordinate_table;
+use super::mcap_out::SCALED_MODEL_ATTACHMENT;
+use super::proto;
+use prost::Message as _;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -50,13 +53,14 @@ pub struct TrialRecord {
     pub frames: Vec<Frame>,
     /// The trial's first sample time (s), added to the messages' times (0 when not recorded).
     pub time_offset: f64,
-    /// The `scaled_model.osim` attachment, when the file has one.
+    /// The scaled model attachment (`scaled_model.osim.zst`, decompressed), when the file has one.
     pub scaled_model: Option<String>,
     /// Where the converted model came from (`smocap.run` → `model`).
     pub model_source: Option<String>,
 }
 
-/// Reads the frames of `path` (a file written by `smocap convert`).
+/// Reads the frames of `path` (a file written by `smocap convert`: protobuf channels, or the
+/// JSON channels of files written before protobuf was the encoding).
 pub fn read_trial_record(path: &Path) -> Result<TrialRecord, ExportError> {
     let file = path.display().to_string();
     let buf = std::fs::read(path).map_err(|source| ExportError::Io { file: file.clone(), source })?;
@@ -75,14 +79,26 @@ pub fn read_trial_record(path: &Path) -> Result<TrialRecord, ExportError> {
             }
             model_source = m.metadata.get("model").cloned();
         }
-        if let Some(idx) = summary.attachment_indexes.iter().find(|a| a.name == "scaled_model.osim") {
-            let a = mcap::read::attachment(&buf, idx).map_err(mc)?;
-            scaled_model = Some(String::from_utf8_lossy(&a.data).into_owned());
+        for a in &summary.attachment_indexes {
+            let compressed = match a.name.as_str() {
+                SCALED_MODEL_ATTACHMENT => true,
+                "scaled_model.osim" => false,
+                _ => continue,
+            };
+            let data = mcap::read::attachment(&buf, a).map_err(mc)?.data;
+            let text = if compressed {
+                zstd::stream::decode_all(&data[..]).map_err(|e| bad(format!("{}: {e}", a.name)))?
+            } else {
+                data.into_owned()
+            };
+            scaled_model = Some(String::from_utf8_lossy(&text).into_owned());
         }
     }
     let mut states = BTreeMap::new();
     let mut rmse = BTreeMap::new();
     let mut status = BTreeMap::new();
+    let mut subject: Option<proto::Subject> = None;
+    let mut raw_states: Vec<proto::State> = Vec::new();
     #[derive(Deserialize)]
     struct Tagged {
         frame: usize,
@@ -92,21 +108,43 @@ pub fn read_trial_record(path: &Path) -> Result<TrialRecord, ExportError> {
     for msg in mcap::MessageStream::new(&buf).map_err(mc)? {
         let msg = msg.map_err(mc)?;
         let topic = msg.channel.topic.as_str();
-        let json = |e: serde_json::Error| bad(format!("{topic} message {}: {e}", msg.sequence));
+        let what = |e: &dyn std::fmt::Display| bad(format!("{topic} message {}: {e}", msg.sequence));
+        if msg.channel.message_encoding == "protobuf" {
+            let data = &msg.data[..];
+            match topic {
+                "/smocap/subject" => subject = Some(proto::Subject::decode(data).map_err(|e| what(&e))?),
+                "/smocap/state" => raw_states.push(proto::State::decode(data).map_err(|e| what(&e))?),
+                "/smocap/stats" => {
+                    let s = proto::SolverStats::decode(data).map_err(|e| what(&e))?;
+                    let f = s.frame as usize;
+                    rmse.insert(f, s.marker_rmse.is_finite().then_some(s.marker_rmse));
+                    status.insert(f, proto::STATUS_NAMES.get(s.status as usize).map(|n| n.to_string()));
+                }
+                _ => {}
+            }
+            continue;
+        }
         match topic {
             "/smocap/state" => {
-                let s: StateMsg = serde_json::from_slice(&msg.data).map_err(json)?;
+                let s: StateMsg = serde_json::from_slice(&msg.data).map_err(|e| what(&e))?;
                 states.insert(s.frame, s);
             }
             "/smocap/residuals" => {
-                let t: Tagged = serde_json::from_slice(&msg.data).map_err(json)?;
+                let t: Tagged = serde_json::from_slice(&msg.data).map_err(|e| what(&e))?;
                 rmse.insert(t.frame, t.rmse);
             }
             "/smocap/stats" => {
-                let t: Tagged = serde_json::from_slice(&msg.data).map_err(json)?;
+                let t: Tagged = serde_json::from_slice(&msg.data).map_err(|e| what(&e))?;
                 status.insert(t.frame, t.status);
             }
             _ => {}
+        }
+    }
+    if !raw_states.is_empty() {
+        let sub = subject.ok_or_else(|| bad("/smocap/state without a /smocap/subject message".into()))?;
+        for s in raw_states {
+            let st = state_by_name(&sub, &s).map_err(|e| bad(format!("/smocap/state frame {}: {e}", s.frame)))?;
+            states.insert(st.frame, st);
         }
     }
     if states.is_empty() {
@@ -117,6 +155,36 @@ pub fn read_trial_record(path: &Path) -> Result<TrialRecord, ExportError> {
         .map(|(f, state)| Frame { state, rmse_m: rmse.get(&f).copied().flatten(), status: status.remove(&f).flatten() })
         .collect();
     Ok(TrialRecord { frames, time_offset, scaled_model, model_source })
+}
+
+/// A protobuf state with its arrays named after `sub`: coordinates by name, each body's scale
+/// factors from its scale proxies (or its fixed value).
+fn state_by_name(sub: &proto::Subject, s: &proto::State) -> Result<StateMsg, String> {
+    let nb = sub.bodies.len();
+    if s.q.len() != sub.coordinates.len() {
+        return Err(format!("{} coordinates for {} named", s.q.len(), sub.coordinates.len()));
+    }
+    if sub.body_scale.len() != 3 * nb || sub.body_scale_proxy.len() != 3 * nb {
+        return Err(format!("the subject's scales do not have 3 values for each of its {nb} bodies"));
+    }
+    let q = sub.coordinates.iter().cloned().zip(s.q.iter().copied()).collect();
+    let mut scales = BTreeMap::new();
+    for (b, body) in sub.bodies.iter().enumerate() {
+        let mut v = [0.0; 3];
+        for (a, x) in v.iter_mut().enumerate() {
+            let i = 3 * b + a;
+            *x = match usize::try_from(sub.body_scale_proxy[i]) {
+                Ok(k) => {
+                    let missing = || format!("scale proxy {k} of body '{body}' is missing");
+                    let drift = *s.scale_drift_ppm.get(k).ok_or_else(missing)?;
+                    sub.calibrated_scale.get(k).ok_or_else(missing)? * (1.0 + drift as f64 * 1e-6)
+                }
+                Err(_) => sub.body_scale[i],
+            };
+        }
+        scales.insert(body.clone(), v);
+    }
+    Ok(StateMsg { time: s.time, frame: s.frame as usize, q, s: scales })
 }
 
 /// The model a record was converted with (its coordinate order and motion types): the shipped
@@ -137,7 +205,7 @@ pub fn conversion_model(rec: &TrialRecord, file: &Path) -> Result<Model, ExportE
         let (model, _) = crate::io::mjcf::read_mjcf(path).map_err(|e| bad(e.to_string()))?;
         return Ok(model);
     }
-    let text = rec.scaled_model.as_deref().ok_or_else(|| bad("no scaled_model.osim attachment".into()))?;
+    let text = rec.scaled_model.as_deref().ok_or_else(|| bad("no scaled model attachment".into()))?;
     let (model, _) = crate::io::osim::parse_osim(text, "scaled_model.osim")
         .map_err(|e| bad(format!("its scaled_model.osim: {e}")))?;
     Ok(model)

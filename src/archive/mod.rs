@@ -8,6 +8,7 @@ pub mod discover;
 pub mod export;
 pub mod inspect;
 pub mod mcap_out;
+pub mod proto;
 pub mod merge;
 pub mod progress;
 pub mod schemas;
@@ -16,6 +17,23 @@ pub mod synthetic;
 pub mod trial_job;
 
 pub use convert::{convert, ConvertOptions, ConvertSummary, TrialOutcome};
+
+/// SHA-256 of a file's bytes, lowercase hex, read in blocks (memory does not grow with its size).
+pub fn sha256_file(path: &std::path::Path) -> std::io::Result<String> {
+    use sha2::{Digest, Sha256};
+    use std::io::Read;
+    let mut f = std::fs::File::open(path)?;
+    let (mut h, mut buf) = (Sha256::new(), vec![0u8; 1 << 16]);
+    loop {
+        match f.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => h.update(&buf[..n]),
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(h.finalize().iter().map(|b| format!("{b:02x}")).collect())
+}
 
 /// SHA-256 of a byte string, lowercase hex.
 pub fn sha256_hex(data: &[u8]) -> String {

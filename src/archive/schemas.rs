@@ -1,100 +1,71 @@
-//! JSON Schemas of the MCAP channels. Ours describe the messages fully; Foxglove's well-known
-//! `foxglove.FrameTransforms` and `foxglove.SceneUpdate` are described for the fields smocap
-//! writes (the schema name is what Foxglove recognises; field names follow its message reference).
+//! The MCAP channels of a converted trial: topic, schema name (Foxglove's well-known names for
+//! Foxglove's messages) and the protobuf descriptor set written as the schema's data, so that any
+//! MCAP reader decodes every channel (`proto/` holds the `.proto` sources, `proto/descriptors/` the
+//! descriptor sets generated from them by `scripts/gen_descriptors.sh`).
 
-use serde_json::{json, Value};
+/// Serialized `google.protobuf.FileDescriptorSet` of `proto/foxglove/schemas.proto` (with the
+/// `google/protobuf` files it imports).
+pub const FOXGLOVE_DESCRIPTORS: &[u8] = include_bytes!("../../proto/descriptors/schemas.fds");
+/// Serialized `google.protobuf.FileDescriptorSet` of `proto/smocap/smocap.proto`.
+pub const SMOCAP_DESCRIPTORS: &[u8] = include_bytes!("../../proto/descriptors/smocap.fds");
 
-fn num(description: &str) -> Value {
-    json!({"type": "number", "description": description})
+/// One channel of a converted trial.
+#[derive(Clone, Copy, Debug)]
+pub struct ChannelSpec {
+    pub topic: &'static str,
+    /// Fully qualified protobuf message name (the MCAP schema name).
+    pub schema: &'static str,
+    /// The schema data (a descriptor set holding `schema`).
+    pub descriptors: &'static [u8],
+    /// Frame of reference of its geometry, where it has any.
+    pub frame: &'static str,
+    /// One message per frame (else one per trial, at the trial's first log time).
+    pub per_frame: bool,
 }
 
-fn time() -> Value {
-    num("Frame time (s) since the trial's first sample")
-}
+/// `/smocap/state`: each frame's coordinates (and scale proxies).
+pub const STATE: ChannelSpec =
+    ChannelSpec { topic: "/smocap/state", schema: "smocap.State", descriptors: SMOCAP_DESCRIPTORS, frame: "", per_frame: true };
+/// `/smocap/stats`: each frame's solver statistics and marker RMSE.
+pub const STATS: ChannelSpec = ChannelSpec {
+    topic: "/smocap/stats",
+    schema: "smocap.SolverStats",
+    descriptors: SMOCAP_DESCRIPTORS,
+    frame: "",
+    per_frame: true,
+};
+/// `/tf`: the transform tree, each body in its parent body, rooted at Z-up `world`.
+pub const TF: ChannelSpec = ChannelSpec {
+    topic: "/tf",
+    schema: "foxglove.FrameTransforms",
+    descriptors: FOXGLOVE_DESCRIPTORS,
+    frame: "world",
+    per_frame: true,
+};
+/// `/markers`: each frame's observed markers, packed float32 x, y, z in the `model` frame.
+pub const MARKERS: ChannelSpec = ChannelSpec {
+    topic: "/markers",
+    schema: "foxglove.PointCloud",
+    descriptors: FOXGLOVE_DESCRIPTORS,
+    frame: "model",
+    per_frame: true,
+};
+/// `/scene`: the skeleton (bones, model marker spheres), one frame-locked entity per body, once.
+pub const SCENE: ChannelSpec = ChannelSpec {
+    topic: "/scene",
+    schema: "foxglove.SceneUpdate",
+    descriptors: FOXGLOVE_DESCRIPTORS,
+    frame: "body frames",
+    per_frame: false,
+};
+/// `/smocap/subject`: the names the other channels' arrays follow and the calibrated scales, once.
+pub const SUBJECT: ChannelSpec = ChannelSpec {
+    topic: "/smocap/subject",
+    schema: "smocap.Subject",
+    descriptors: SMOCAP_DESCRIPTORS,
+    frame: "",
+    per_frame: false,
+};
 
-fn vec3() -> Value {
-    json!({"type": "object", "properties": {"x": {"type": "number"}, "y": {"type": "number"}, "z": {"type": "number"}},
-        "required": ["x", "y", "z"]})
-}
-
-fn quat() -> Value {
-    json!({"type": "object", "properties": {"x": {"type": "number"}, "y": {"type": "number"},
-        "z": {"type": "number"}, "w": {"type": "number"}}, "required": ["x", "y", "z", "w"]})
-}
-
-fn stamp() -> Value {
-    json!({"type": "object", "title": "time", "properties": {"sec": {"type": "integer", "minimum": 0},
-        "nsec": {"type": "integer", "minimum": 0, "maximum": 999_999_999}}})
-}
-
-fn color() -> Value {
-    json!({"type": "object", "title": "foxglove.Color", "properties": {"r": {"type": "number"}, "g": {"type": "number"},
-        "b": {"type": "number"}, "a": {"type": "number"}}})
-}
-
-fn point3() -> Value {
-    json!({"type": ["array", "null"], "items": {"type": "number"}, "minItems": 3, "maxItems": 3})
-}
-
-/// `smocap.State`: coordinates, per-body scales and proxies of one frame.
-pub fn state() -> Value {
-    json!({"title": "smocap.State", "type": "object", "properties": {
-        "time": time(), "frame": {"type": "integer", "description": "Frame index in the trial (0-based)"},
-        "q": {"type": "object", "additionalProperties": {"type": "number"}, "description": "Coordinates by name (rad or m)"},
-        "s": {"type": "object", "additionalProperties": {"type": "array", "items": {"type": "number"}},
-            "description": "Per-body scale factors [sx, sy, sz] by body name"},
-        "p": {"type": "object", "additionalProperties": {"type": "number"}, "description": "Solver proxies by name"}},
-        "required": ["time", "frame", "q", "s", "p"]})
-}
-
-/// `smocap.Residuals`: observed and model marker positions (m, world) and their difference.
-pub fn residuals() -> Value {
-    json!({"title": "smocap.Residuals", "type": "object", "properties": {
-        "time": time(), "frame": {"type": "integer"},
-        "rmse": {"type": ["number", "null"], "description": "RMS marker error over observed markers (m)"},
-        "markers": {"type": "array", "items": {"type": "object", "properties": {
-            "name": {"type": "string"}, "observed": point3(), "model": point3(),
-            "error": {"description": "observed − model (m); null when not observed", "type": ["array", "null"]}},
-            "required": ["name", "observed", "model", "error"]}}},
-        "required": ["time", "frame", "rmse", "markers"]})
-}
-
-/// `smocap.SolverStats`: how the frame's solve went.
-pub fn stats() -> Value {
-    json!({"title": "smocap.SolverStats", "type": "object", "properties": {
-        "time": time(), "frame": {"type": "integer"},
-        "iterations": {"type": "integer"}, "accepted_steps": {"type": "integer"},
-        "energy": {"type": ["number", "null"], "description": "Objective at the solution"},
-        "rmse": {"type": ["number", "null"], "description": "Weighted marker RMSE (m)"},
-        "markers_used": {"type": "integer"}, "solve_s": num("Solve time (s)"),
-        "status": {"type": "string", "enum": ["Converged", "MaxIterations", "TooFewMarkers", "QpFailed", "Stalled"]},
-        "bridged": {"type": "boolean", "description": "Interpolated from neighbours (too few markers)"}},
-        "required": ["time", "frame", "iterations", "accepted_steps", "energy", "rmse", "status"]})
-}
-
-/// `foxglove.FrameTransforms`.
-pub fn frame_transforms() -> Value {
-    json!({"title": "foxglove.FrameTransforms", "type": "object", "properties": {
-        "transforms": {"type": "array", "items": {"title": "foxglove.FrameTransform", "type": "object", "properties": {
-            "timestamp": stamp(), "parent_frame_id": {"type": "string"}, "child_frame_id": {"type": "string"},
-            "translation": vec3(), "rotation": quat()}}}}})
-}
-
-/// `foxglove.SceneUpdate` (spheres and lines; the other primitive lists are written empty).
-pub fn scene_update() -> Value {
-    let pose =
-        json!({"title": "foxglove.Pose", "type": "object", "properties": {"position": vec3(), "orientation": quat()}});
-    let empty = json!({"type": "array"});
-    json!({"title": "foxglove.SceneUpdate", "type": "object", "properties": {
-        "deletions": empty,
-        "entities": {"type": "array", "items": {"title": "foxglove.SceneEntity", "type": "object", "properties": {
-            "timestamp": stamp(), "frame_id": {"type": "string"}, "id": {"type": "string"},
-            "lifetime": stamp(), "frame_locked": {"type": "boolean"}, "metadata": empty,
-            "arrows": empty, "cubes": empty, "cylinders": empty, "triangles": empty, "texts": empty, "models": empty,
-            "spheres": {"type": "array", "items": {"title": "foxglove.SpherePrimitive", "type": "object",
-                "properties": {"pose": pose, "size": vec3(), "color": color()}}},
-            "lines": {"type": "array", "items": {"title": "foxglove.LinePrimitive", "type": "object", "properties": {
-                "type": {"type": "integer", "description": "0 LINE_STRIP, 1 LINE_LOOP, 2 LINE_LIST"},
-                "pose": pose, "thickness": {"type": "number"}, "scale_invariant": {"type": "boolean"},
-                "points": {"type": "array", "items": vec3()}, "color": color(), "colors": empty, "indices": empty}}}}}}}})
-}
+/// Every channel, in channel-id order.
+pub const CHANNELS: [ChannelSpec; 6] = [STATE, STATS, TF, MARKERS, SCENE, SUBJECT];

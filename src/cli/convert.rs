@@ -3,6 +3,7 @@
 use crate::archive::config::read_datasets;
 use crate::archive::progress::{Display, Mode, Progress};
 use crate::archive::shard::Shard;
+use crate::archive::mcap_out::WriterOptions;
 use crate::archive::{convert, ConvertOptions};
 use anyhow::Context as _;
 use clap::Args;
@@ -42,6 +43,22 @@ pub struct ConvertArgs {
     /// progress bars instead).
     #[arg(long, default_value_t = 10.0, value_name = "SECONDS")]
     pub progress_every: f64,
+    /// Log time of each trial's first sample: `YYYY-MM-DDTHH:MM:SSZ` (UTC) or seconds since
+    /// 1970-01-01 (TRC and C3D files record no start time that smocap reads).
+    #[arg(long, default_value = "2000-01-01T00:00:00Z", value_parser = parse_epoch)]
+    pub epoch: u64,
+    /// zstd level of the MCAP chunks (1-22).
+    #[arg(long, default_value_t = crate::archive::mcap_out::DEFAULT_ZSTD_LEVEL,
+        value_parser = clap::value_parser!(u32).range(1..=22))]
+    pub zstd_level: u32,
+    /// Record each frame's wall-clock solve time in `/smocap/stats` (`solve_s`); without it
+    /// the files of the same input are byte-identical across runs.
+    #[arg(long)]
+    pub timings: bool,
+}
+
+fn parse_epoch(s: &str) -> Result<u64, String> {
+    crate::archive::mcap_out::parse_epoch(s)
 }
 
 pub fn run(a: ConvertArgs) -> anyhow::Result<u8> {
@@ -57,6 +74,12 @@ pub fn run(a: ConvertArgs) -> anyhow::Result<u8> {
         shard,
         resume: a.resume,
         progress: Some(progress.clone()),
+        writer: WriterOptions {
+            epoch_ns: a.epoch,
+            zstd_level: a.zstd_level,
+            timings: a.timings,
+            ..WriterOptions::default()
+        },
     };
     let every = Duration::try_from_secs_f64(a.progress_every).context("--progress-every: seconds expected")?;
     let display = Display::start(progress, Mode::auto(a.quiet, every));

@@ -200,6 +200,12 @@ pub fn parse_trc(text: &str, name_for_errors: &str) -> Result<MarkerTrial, TrcEr
     }
 
     let mut trial = MarkerTrial { labels, rate_hz, source_units: units, ..MarkerTrial::default() };
+    // At most one frame per remaining line: reserved once, so the arrays neither overshoot by
+    // doubling nor hold two copies while growing (what a row allocates anyway: 3 values per label).
+    let rows = lines.len().saturating_sub(first_data);
+    trial.positions.reserve_exact(rows.saturating_mul(3 * nm));
+    trial.times.reserve_exact(rows);
+    trial.frame_numbers.reserve_exact(rows);
     let mut time_warned = false;
     let per_m = per_metre(scale);
     for (idx, raw) in lines.iter().enumerate().skip(first_data) {
