@@ -13,6 +13,8 @@ pub enum DiscoverError {
     Glob { dataset: String, glob: String, source: globset::Error },
     #[error("{path}: {source}")]
     Io { path: String, source: std::io::Error },
+    #[error("{root}: more than {max} files and folders below it; is `root` right?")]
+    TooMany { root: String, max: usize },
 }
 
 /// One motion trial.
@@ -41,19 +43,34 @@ impl SubjectGroup {
     }
 }
 
-/// Every file under `root`, as `/`-separated paths relative to it, sorted.
+/// Most directory entries discovery looks at under one dataset root (files and folders).
+pub const MAX_ENTRIES: usize = 1_000_000;
+/// Deepest folder level below a dataset root that discovery descends to.
+pub const MAX_DEPTH: usize = 64;
+
+/// Every regular file under `root` (a symbolic link to a regular file counts; links to folders
+/// are not followed, so link loops cannot make a walk endless; FIFOs, sockets and devices are
+/// left), as `/`-separated paths relative to it, sorted; the walk stays on `root`'s file
+/// system and stops with an error past [`MAX_ENTRIES`] entries.
 fn walk(root: &Path) -> Result<Vec<String>, DiscoverError> {
     let mut out = Vec::new();
-    let mut stack = vec![root.to_path_buf()];
-    while let Some(dir) = stack.pop() {
-        let io = |source| DiscoverError::Io { path: dir.display().to_string(), source };
-        for e in std::fs::read_dir(&dir).map_err(io)? {
-            let p = e.map_err(io)?.path();
-            if p.is_dir() {
-                stack.push(p);
-            } else if let Ok(rel) = p.strip_prefix(root) {
-                out.push(rel.components().map(|c| c.as_os_str().to_string_lossy()).collect::<Vec<_>>().join("/"));
-            }
+    let walker = walkdir::WalkDir::new(root).follow_links(false).same_file_system(true).max_depth(MAX_DEPTH);
+    for (n, e) in walker.into_iter().enumerate() {
+        if n >= MAX_ENTRIES {
+            return Err(DiscoverError::TooMany { root: root.display().to_string(), max: MAX_ENTRIES });
+        }
+        let e = e.map_err(|e| {
+            let path = e.path().unwrap_or(root).display().to_string();
+            let source = e.into_io_error().unwrap_or_else(|| std::io::Error::other("unreadable entry"));
+            DiscoverError::Io { path, source }
+        })?;
+        let t = e.file_type();
+        let regular = t.is_file() || t.is_symlink() && std::fs::metadata(e.path()).is_ok_and(|m| m.is_file());
+        if !regular {
+            continue;
+        }
+        if let Ok(rel) = e.path().strip_prefix(root) {
+            out.push(rel.components().map(|c| c.as_os_str().to_string_lossy()).collect::<Vec<_>>().join("/"));
         }
     }
     out.sort();

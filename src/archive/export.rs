@@ -22,6 +22,8 @@ pub enum ExportError {
     Csv { file: String, source: csv::Error },
     #[error(transparent)]
     Sto(#[from] StoError),
+    #[error(transparent)]
+    Read(#[from] super::inspect::InspectError),
 }
 
 /// One frame of the state channel (times in s since the trial's first sample).
@@ -56,17 +58,23 @@ pub struct TrialRecord {
     pub model_source: Option<String>,
 }
 
-/// Reads the frames of `path` (a file written by `smocap convert`).
+/// Reads the frames of `path` (a file written by `smocap convert`); its MCAP structure is
+/// checked first ([`super::inspect::read_checked`]).
 pub fn read_trial_record(path: &Path) -> Result<TrialRecord, ExportError> {
-    let file = path.display().to_string();
-    let buf = std::fs::read(path).map_err(|source| ExportError::Io { file: file.clone(), source })?;
+    parse_trial_record(&super::inspect::read_checked(path)?, &path.display().to_string())
+}
+
+/// The frames of the MCAP file `buf` (named `file` in errors), structure checked first.
+pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportError> {
+    let file = file.to_string();
+    super::mcap_check::check(buf).map_err(|source| super::inspect::InspectError::Format { file: file.clone(), source })?;
     let mc = |source| ExportError::Mcap { file: file.clone(), source };
     let bad = |what: String| ExportError::Content { file: file.clone(), what };
-    let summary = mcap::Summary::read(&buf).map_err(mc)?;
+    let summary = mcap::Summary::read(buf).map_err(mc)?;
     let (mut time_offset, mut scaled_model, mut model_source) = (0.0, None, None);
     if let Some(summary) = &summary {
         for idx in &summary.metadata_indexes {
-            let m = mcap::read::metadata(&buf, idx).map_err(mc)?;
+            let m = mcap::read::metadata(buf, idx).map_err(mc)?;
             if m.name != "smocap.run" {
                 continue;
             }
@@ -76,7 +84,7 @@ pub fn read_trial_record(path: &Path) -> Result<TrialRecord, ExportError> {
             model_source = m.metadata.get("model").cloned();
         }
         if let Some(idx) = summary.attachment_indexes.iter().find(|a| a.name == "scaled_model.osim") {
-            let a = mcap::read::attachment(&buf, idx).map_err(mc)?;
+            let a = mcap::read::attachment(buf, idx).map_err(mc)?;
             scaled_model = Some(String::from_utf8_lossy(&a.data).into_owned());
         }
     }
@@ -89,7 +97,7 @@ pub fn read_trial_record(path: &Path) -> Result<TrialRecord, ExportError> {
         rmse: Option<f64>,
         status: Option<String>,
     }
-    for msg in mcap::MessageStream::new(&buf).map_err(mc)? {
+    for msg in mcap::MessageStream::new(buf).map_err(mc)? {
         let msg = msg.map_err(mc)?;
         let topic = msg.channel.topic.as_str();
         let json = |e: serde_json::Error| bad(format!("{topic} message {}: {e}", msg.sequence));

@@ -7,6 +7,8 @@ pub mod convert;
 pub mod discover;
 pub mod export;
 pub mod inspect;
+pub mod lock;
+pub mod mcap_check;
 pub mod mcap_out;
 pub mod merge;
 pub mod progress;
