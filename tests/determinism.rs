@@ -104,3 +104,35 @@ fn segments_are_a_function_of_the_frame_count_alone() {
         assert!(n < SEGMENT_FRAMES || s.iter().all(|(a, b)| b - a >= SEGMENT_FRAMES));
     }
 }
+
+/// A trial cut into two segments (450 frames: cut at 225) against the same frames solved uncut
+/// (its first 399 frames: one segment): from the cut on, the two agree to within the solver's
+/// tolerance, because the second segment's lane tracks 20 frames into the cut before it keeps any.
+#[test]
+fn a_segment_cut_is_invisible_in_the_result() {
+    use smocap::pipeline::{calibrate_subject, solve_trial, Context};
+    use smocap::synth::{synthesize, SynthOptions};
+    let mut ctx = Context::shipped().unwrap();
+    ctx.settings.presolve = smocap::solve::Presolve::Never;
+    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 450, seed: 31, noise_m: 0.002, ..SynthOptions::default() });
+    let cal = calibrate_subject(&ctx, &[("t", &s.trial)]).unwrap();
+    let cut = smocap::pipeline::stream::segments(450)[1].0;
+    let n = 399;
+    let w = 3 * s.trial.n_markers();
+    let mut head = s.trial.clone();
+    head.times.truncate(n);
+    head.frame_numbers.truncate(n);
+    head.positions.truncate(n * w);
+    let whole = solve_trial(&ctx, "t", &s.trial, &cal, 2).unwrap();
+    let uncut = solve_trial(&ctx, "t", &head, &cal, 2).unwrap();
+    let mut worst = 0.0f64;
+    for f in 0..n {
+        let d = whole.proxies[f].iter().zip(&uncut.proxies[f]).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        if f < cut {
+            assert_eq!(d, 0.0, "frame {f} before the cut");
+        }
+        worst = worst.max(d);
+    }
+    eprintln!("largest proxy difference from the cut on: {worst:.3e}");
+    assert!(worst < 1e-3, "the cut shows: {worst}");
+}

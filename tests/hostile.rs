@@ -482,3 +482,12 @@ fn a_file_size_limit_fails_the_trial_and_leaves_no_temporary_file() {
     assert!(files(&out, ".partial").is_empty(), "{:?}", files(&out, ""));
     assert!(files(&out, ".mcap").is_empty());
 }
+
+#[test]
+fn a_missing_trial_file_is_named_once_with_its_error_said_once() {
+    let o = smocap(&["solve", "/nonexistent/walk.trc"]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    let line = err.lines().find(|l| l.starts_with("error:")).unwrap_or("");
+    assert_eq!(line.matches("No such file or directory").count(), 1, "{err}");
+}

@@ -220,7 +220,14 @@ pub fn convert(
             note.skipped = Some(why);
         } else {
             let found = match &d.synthetic {
-                Some(spec) => super::synthetic::generate(spec, &root).map_err(|e| format!("generating it: {e:#}")),
+                Some(spec) => super::synthetic::generate(spec, &root).map_err(|e| {
+                    let (top, cause) = (e.to_string(), e.root_cause().to_string());
+                    if top.contains(&cause) {
+                        format!("generating it: {top}")
+                    } else {
+                        format!("generating it: {top}: {cause}")
+                    }
+                }),
                 None => Ok(()),
             }
             .and_then(|()| discover(i, d, &root).map_err(|e| e.to_string()));

@@ -101,13 +101,31 @@ pub fn main() -> ExitCode {
         Err(e) => {
             let top = e.to_string();
             eprintln!("error: {top}");
-            // Causes that the message already quotes are not repeated.
-            for cause in e.chain().skip(1).map(|c| c.to_string()).filter(|c| !top.contains(c.as_str())) {
+            for cause in new_causes(&e) {
                 eprintln!("  caused by: {cause}");
             }
             ExitCode::from(1)
         }
     }
+}
+
+/// The causes of `e` that its message (and the causes before them) do not already quote.
+fn new_causes(e: &anyhow::Error) -> Vec<String> {
+    let mut said = e.to_string();
+    let mut out = Vec::new();
+    for cause in e.chain().skip(1).map(|c| c.to_string()) {
+        if !said.contains(cause.as_str()) {
+            said += &cause;
+            out.push(cause);
+        }
+    }
+    out
+}
+
+/// `e` on one line: its message, then each cause it does not already quote (`a: b`), so that
+/// an I/O error is not said twice.
+pub(crate) fn one_line(e: &anyhow::Error) -> String {
+    std::iter::once(e.to_string()).chain(new_causes(e)).collect::<Vec<_>>().join(": ")
 }
 
 /// Loads the context named by `--model`/`--profile` (the shipped model by default).

@@ -143,7 +143,7 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         let name = p.display().to_string();
         match read_trial(&ctx, p, &input_opt) {
             Ok((t, conv)) => loaded.push((name, t, conv)),
-            Err(e) => report.push(Report::failed(&name, format!("{e:#}"))),
+            Err(e) => report.push(Report::failed(&name, super::one_line(&e))),
         }
     }
     let calibration_input: Vec<(&str, &crate::io::MarkerTrial)> = match (&static_path, &static_trial) {
