@@ -491,3 +491,26 @@ fn a_missing_trial_file_is_named_once_with_its_error_said_once() {
     let line = err.lines().find(|l| l.starts_with("error:")).unwrap_or("");
     assert_eq!(line.matches("No such file or directory").count(), 1, "{err}");
 }
+
+#[test]
+fn a_trc_with_cr_only_line_endings_reads_as_with_lf() {
+    let (dir, _) = archive("cr-only", 1, 1, 10);
+    let text = std::fs::read_to_string(dir.join("data/subj01/walk01.trc")).unwrap();
+    let lf = smocap::io::trc::parse_trc(&text, "lf.trc").unwrap();
+    let cr = smocap::io::trc::parse_trc(&text.replace("\r\n", "\n").replace('\n', "\r"), "cr.trc").unwrap();
+    assert_eq!((cr.labels, cr.times), (lf.labels, lf.times));
+    assert_eq!(cr.positions.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), lf.positions.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
+}
+
+#[test]
+fn markers_of_weight_zero_alone_leave_nothing_to_solve_and_the_trial_fails() {
+    use smocap::pipeline::{calibrate_subject, solve_trial, Context, TrialError};
+    use smocap::synth::{synthesize, SynthOptions};
+    let mut ctx = Context::shipped().unwrap();
+    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 20, seed: 3, ..SynthOptions::default() });
+    let cal = calibrate_subject(&ctx, &[("t", &s.trial)]).unwrap();
+    // As an IK setup whose marker tasks all have weight 0.
+    ctx.marker_weights.iter_mut().for_each(|w| *w = 0.0);
+    let e = solve_trial(&ctx, "t", &s.trial, &cal, 1).unwrap_err();
+    assert!(matches!(e, TrialError::NothingSolvable { .. }), "{e}");
+}
