@@ -25,8 +25,17 @@ fn ok(o: Output) -> Output {
 
 /// `v` without the fields that measure time or name the parallelism.
 fn without_timing(mut v: serde_json::Value) -> serde_json::Value {
-    const TIMING: [&str; 9] =
-        ["ms_per_frame", "solve_wall_s", "frames_per_s", "solve_s", "threads", "lanes", "wall_seconds", "totals", "output"];
+    const TIMING: [&str; 9] = [
+        "ms_per_frame",
+        "solve_wall_s",
+        "frames_per_s",
+        "solve_s",
+        "threads",
+        "lanes",
+        "wall_seconds",
+        "totals",
+        "output",
+    ];
     fn strip(v: &mut serde_json::Value) {
         match v {
             serde_json::Value::Object(m) => {
@@ -50,7 +59,19 @@ fn solve_with_one_or_two_threads_gives_identical_mot_and_report_numbers() {
     let dir = tmp("solve");
     let trc = dir.join("walk.trc");
     let s = |p: &Path| p.to_str().unwrap().to_string();
-    ok(smocap(&["synth", "--frames", "450", "--noise-mm", "2", "--seed", "5", "--out", &s(&trc), "--truth", &s(&dir.join("t.json"))]));
+    ok(smocap(&[
+        "synth",
+        "--frames",
+        "450",
+        "--noise-mm",
+        "2",
+        "--seed",
+        "5",
+        "--out",
+        &s(&trc),
+        "--truth",
+        &s(&dir.join("t.json")),
+    ]));
     let run = |threads: &str| {
         let mot = dir.join(format!("mot{threads}"));
         let rep = dir.join(format!("r{threads}.json"));
@@ -114,7 +135,11 @@ fn a_segment_cut_is_invisible_in_the_result() {
     use smocap::synth::{synthesize, SynthOptions};
     let mut ctx = Context::shipped().unwrap();
     ctx.settings.presolve = smocap::solve::Presolve::Never;
-    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 450, seed: 31, noise_m: 0.002, ..SynthOptions::default() });
+    let s = synthesize(
+        &ctx.model,
+        &ctx.proxy,
+        &SynthOptions { frames: 450, seed: 31, noise_m: 0.002, ..SynthOptions::default() },
+    );
     let cal = calibrate_subject(&ctx, &[("t", &s.trial)]).unwrap();
     let cut = smocap::pipeline::stream::segments(450)[1].0;
     let n = 399;

@@ -150,7 +150,14 @@ fn trials_that_differ_only_by_extension_fail_with_both_names_before_any_work() {
     std::fs::copy(subj.join("walk01.trc"), subj.join("walk01.c3d")).unwrap();
     let out = dir.join("out");
     let rep = dir.join("r.json");
-    let o = smocap(&["convert", toml.to_str().unwrap(), "--out", out.to_str().unwrap(), "--report-json", rep.to_str().unwrap()]);
+    let o = smocap(&[
+        "convert",
+        toml.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--report-json",
+        rep.to_str().unwrap(),
+    ]);
     assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
     let st = statuses(&rep);
     assert_eq!(st.len(), 3, "{st:?}");
@@ -169,7 +176,8 @@ fn a_dataset_name_with_dotdot_a_separator_or_an_absolute_path_is_refused() {
     let dir = tmp("names");
     for name in ["../escape", "/tmp/abs", "a/b", "..", ".", ".hidden", ""] {
         let toml = dir.join("d.toml");
-        std::fs::write(&toml, format!("[[dataset]]\nname = \"{name}\"\nroot = \"data\"\ntrials = [\"*.trc\"]\n")).unwrap();
+        std::fs::write(&toml, format!("[[dataset]]\nname = \"{name}\"\nroot = \"data\"\ntrials = [\"*.trc\"]\n"))
+            .unwrap();
         let e = read_datasets(&toml, None).unwrap_err().to_string();
         assert!(e.contains("name"), "{name}: {e}");
     }
@@ -210,9 +218,10 @@ fn discovery_does_not_follow_link_loops_or_open_fifos() {
     let (tx, rx) = std::sync::mpsc::channel();
     let root = dir.join("data");
     std::thread::spawn(move || {
-        let _ = tx.send(smocap::archive::discover::discover(0, &ds[0], &root).map(|g| {
-            g.iter().flat_map(|g| g.trials.iter().map(|t| t.rel.clone())).collect::<Vec<_>>()
-        }));
+        let _ = tx.send(
+            smocap::archive::discover::discover(0, &ds[0], &root)
+                .map(|g| g.iter().flat_map(|g| g.trials.iter().map(|t| t.rel.clone())).collect::<Vec<_>>()),
+        );
     });
     let found = rx.recv_timeout(Duration::from_secs(60)).expect("discovery finishes").unwrap();
     // The file link is a trial; the folder links and the FIFO are not walked into or read.
@@ -233,7 +242,15 @@ fn a_model_with_twenty_thousand_bodies_is_refused_with_a_clear_error() {
     let dir = tmp("bigmodel");
     std::fs::write(dir.join("big.xml"), &xml).unwrap();
     let (model, trc, truth) = (dir.join("big.xml"), dir.join("x.trc"), dir.join("x.json"));
-    let o = smocap(&["synth", "--model", model.to_str().unwrap(), "--out", trc.to_str().unwrap(), "--truth", truth.to_str().unwrap()]);
+    let o = smocap(&[
+        "synth",
+        "--model",
+        model.to_str().unwrap(),
+        "--out",
+        trc.to_str().unwrap(),
+        "--truth",
+        truth.to_str().unwrap(),
+    ]);
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     assert!(stderr(&o).contains("at most 1000"), "{}", stderr(&o));
 }
@@ -298,8 +315,11 @@ fn absurd_synthetic_counts_shards_and_workers_are_errors_not_panics() {
         "subjects = 100000, trials = 1, frames = 10",
     ] {
         let toml = dir.join("d.toml");
-        std::fs::write(&toml, format!("[[dataset]]\nname = \"s\"\ntrials = [\"*/walk*.trc\"]\nsynthetic = {{ {spec} }}\n"))
-            .unwrap();
+        std::fs::write(
+            &toml,
+            format!("[[dataset]]\nname = \"s\"\ntrials = [\"*/walk*.trc\"]\nsynthetic = {{ {spec} }}\n"),
+        )
+        .unwrap();
         let e = read_datasets(&toml, None).unwrap_err().to_string();
         assert!(e.contains("synthetic"), "{spec}: {e}");
     }
@@ -397,7 +417,14 @@ fn a_garbage_trial_in_an_archive_counts_as_failed_in_the_exit_code() {
     smocap::io::trc::write_trc(&w2, &t, "mm").unwrap();
     let rep = dir.join("r.json");
     let out = dir.join("out");
-    let o = smocap(&["convert", toml.to_str().unwrap(), "--out", out.to_str().unwrap(), "--report-json", rep.to_str().unwrap()]);
+    let o = smocap(&[
+        "convert",
+        toml.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--report-json",
+        rep.to_str().unwrap(),
+    ]);
     assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
     let st = statuses(&rep);
     assert_eq!((st[0].1.as_str(), st[1].1.as_str()), ("ok", "failed"), "{st:?}");
@@ -418,7 +445,9 @@ fn convert_exits_1_when_nothing_could_run_and_3_only_when_some_trials_failed() {
         let o = smocap(&args);
         (o.status.code(), stderr(&o))
     };
-    let ds = |trials: &str| format!("[[dataset]]\nname = \"lab\"\nroot = \"data\"\ntrials = [{trials}]\nstatic = \"{{subject}}/static.trc\"\nsubject = \"{{subject}}/{{trial}}\"\n");
+    let ds = |trials: &str| {
+        format!("[[dataset]]\nname = \"lab\"\nroot = \"data\"\ntrials = [{trials}]\nstatic = \"{{subject}}/static.trc\"\nsubject = \"{{subject}}/{{trial}}\"\n")
+    };
     // A bad glob.
     let (code, err) = run(&ds("\"[\""), &[]);
     assert_eq!(code, Some(1), "{err}");
@@ -457,7 +486,8 @@ fn export_into_a_missing_folder_creates_it() {
 fn solve_finds_mot_name_clashes_and_creates_the_scaled_model_folder_before_solving() {
     let (dir, _) = archive("solve-outputs", 2, 1, 10);
     let (a, b) = (dir.join("data/subj01/walk01.trc"), dir.join("data/subj02/walk01.trc"));
-    let o = smocap(&["solve", a.to_str().unwrap(), b.to_str().unwrap(), "--mot-dir", dir.join("mot").to_str().unwrap()]);
+    let o =
+        smocap(&["solve", a.to_str().unwrap(), b.to_str().unwrap(), "--mot-dir", dir.join("mot").to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     assert!(stderr(&o).contains("would both write"), "{}", stderr(&o));
     assert!(!stderr(&o).contains("wrote"), "found before any .mot is written: {}", stderr(&o));
@@ -499,7 +529,10 @@ fn a_trc_with_cr_only_line_endings_reads_as_with_lf() {
     let lf = smocap::io::trc::parse_trc(&text, "lf.trc").unwrap();
     let cr = smocap::io::trc::parse_trc(&text.replace("\r\n", "\n").replace('\n', "\r"), "cr.trc").unwrap();
     assert_eq!((cr.labels, cr.times), (lf.labels, lf.times));
-    assert_eq!(cr.positions.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), lf.positions.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
+    assert_eq!(
+        cr.positions.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+        lf.positions.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+    );
 }
 
 #[test]

@@ -120,7 +120,8 @@ impl ConvertSummary {
                 s += &format!("{:<24} skipped: {why}\n", d.name);
                 continue;
             }
-            let count = |st: &str| ts.iter().filter(|t| t.status == st || st == "failed" && t.status == "suspect").count();
+            let count =
+                |st: &str| ts.iter().filter(|t| t.status == st || st == "failed" && t.status == "suspect").count();
             let solved: Vec<&&TrialOutcome> = ts.iter().filter(|t| t.status == "ok").collect();
             let frames: usize = solved.iter().map(|t| t.frames).sum();
             let secs: f64 = solved.iter().map(|t| t.solve_s).sum();
@@ -160,8 +161,9 @@ pub fn output_path(out: &Path, dataset: &str, rel: &str) -> PathBuf {
 /// prefix), as [`output_path`] gives for a valid dataset name and a discovered trial.
 pub fn inside(out: &Path, path: &Path) -> bool {
     use std::path::Component;
-    path.strip_prefix(out)
-        .is_ok_and(|rel| rel.components().next().is_some() && rel.components().all(|c| matches!(c, Component::Normal(_))))
+    path.strip_prefix(out).is_ok_and(|rel| {
+        rel.components().next().is_some() && rel.components().all(|c| matches!(c, Component::Normal(_)))
+    })
 }
 
 /// Trials that cannot be converted because of where their output would go, with the reason:

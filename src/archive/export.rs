@@ -67,7 +67,8 @@ pub fn read_trial_record(path: &Path) -> Result<TrialRecord, ExportError> {
 /// The frames of the MCAP file `buf` (named `file` in errors), structure checked first.
 pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportError> {
     let file = file.to_string();
-    super::mcap_check::check(buf).map_err(|source| super::inspect::InspectError::Format { file: file.clone(), source })?;
+    super::mcap_check::check(buf)
+        .map_err(|source| super::inspect::InspectError::Format { file: file.clone(), source })?;
     let mc = |source| ExportError::Mcap { file: file.clone(), source };
     let bad = |what: String| ExportError::Content { file: file.clone(), what };
     let summary = mcap::Summary::read(buf).map_err(mc)?;

@@ -135,10 +135,8 @@ fn checked_complete(buf: &[u8], file: &str) -> Result<McapInfo, InspectError> {
         }
     }
     let run = info.metadata.get("smocap.run").ok_or_else(|| bad("no smocap.run metadata".into()))?;
-    let frames: u64 = run
-        .get("frames")
-        .and_then(|f| f.parse().ok())
-        .ok_or_else(|| bad("smocap.run has no frame count".into()))?;
+    let frames: u64 =
+        run.get("frames").and_then(|f| f.parse().ok()).ok_or_else(|| bad("smocap.run has no frame count".into()))?;
     let states = counts.get("/smocap/state").copied().unwrap_or(0);
     if states != frames {
         return Err(bad(format!("{states} /smocap/state messages for the {frames} frames recorded")));

@@ -2,8 +2,8 @@
 
 use crate::pipeline::report::{trial_report, Report};
 use crate::pipeline::solve_trial_with;
-use crate::pipeline::verdict::Verdict;
 use crate::pipeline::subject::{calibrate_placed, prepare_subject, Subject, SubjectFiles};
+use crate::pipeline::verdict::Verdict;
 use crate::solve::QpBackend;
 use crate::synth::Truth;
 use anyhow::Context as _;
@@ -235,7 +235,8 @@ fn judge(r: &crate::pipeline::TrialResult) -> Verdict {
 /// Creates the folders the outputs go to, and finds `.mot` name clashes, before any work.
 fn prepare_outputs(a: &SolveArgs) -> anyhow::Result<()> {
     let parent = |p: &std::path::Path| p.parent().filter(|d| !d.as_os_str().is_empty()).map(|d| d.to_path_buf());
-    let mut dirs: Vec<PathBuf> = [a.report_json.as_deref(), a.scaled_model.as_deref()].into_iter().flatten().filter_map(parent).collect();
+    let mut dirs: Vec<PathBuf> =
+        [a.report_json.as_deref(), a.scaled_model.as_deref()].into_iter().flatten().filter_map(parent).collect();
     dirs.extend(a.mot_dir.clone());
     for d in dirs {
         std::fs::create_dir_all(&d).with_context(|| format!("creating {}", d.display()))?;

@@ -112,8 +112,7 @@ impl Judge {
             self.solved += 1;
             self.at_cap += (stats.status == FrameStatus::MaxIterations) as usize;
         }
-        if self.nonfinite.is_none() && (!finite || solved && !(stats.rmse_m.is_finite() && stats.energy.is_finite()))
-        {
+        if self.nonfinite.is_none() && (!finite || solved && !(stats.rmse_m.is_finite() && stats.energy.is_finite())) {
             self.nonfinite = Some(f);
         }
     }
