@@ -53,11 +53,16 @@ pub const MAX_DEPTH: usize = 64;
 /// left), as `/`-separated paths relative to it, sorted; the walk stays on `root`'s file
 /// system and stops with an error past [`MAX_ENTRIES`] entries.
 fn walk(root: &Path) -> Result<Vec<String>, DiscoverError> {
+    walk_bounded(root, MAX_ENTRIES)
+}
+
+/// [`walk`] stopping past `max_entries` entries.
+fn walk_bounded(root: &Path, max_entries: usize) -> Result<Vec<String>, DiscoverError> {
     let mut out = Vec::new();
     let walker = walkdir::WalkDir::new(root).follow_links(false).same_file_system(true).max_depth(MAX_DEPTH);
     for (n, e) in walker.into_iter().enumerate() {
-        if n >= MAX_ENTRIES {
-            return Err(DiscoverError::TooMany { root: root.display().to_string(), max: MAX_ENTRIES });
+        if n >= max_entries {
+            return Err(DiscoverError::TooMany { root: root.display().to_string(), max: max_entries });
         }
         let e = e.map_err(|e| {
             let path = e.path().unwrap_or(root).display().to_string();
@@ -187,4 +192,22 @@ pub fn discover(index: usize, d: &Dataset, root: &Path) -> Result<Vec<SubjectGro
         }
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_walk_past_its_entry_bound_stops_with_an_error() {
+        let root = std::env::temp_dir().join(format!("smocap-walk-bound-{}", std::process::id()));
+        std::fs::create_dir_all(root.join("a/b")).unwrap();
+        for i in 0..20 {
+            std::fs::write(root.join(format!("a/b/t{i}.trc")), "").unwrap();
+        }
+        assert_eq!(walk_bounded(&root, 100).unwrap().len(), 20);
+        let e = walk_bounded(&root, 10).unwrap_err().to_string();
+        assert!(e.contains("more than 10 files and folders"), "{e}");
+        let _ = std::fs::remove_dir_all(&root);
+    }
 }
