@@ -66,3 +66,26 @@ fn nothing_in_common_leaves_everything_unmatched() {
     let m = match_names(&[], &[]).expect("empty");
     assert!(m.columns.is_empty());
 }
+
+#[test]
+fn plug_in_gait_cmu_and_opensim_spellings_match_through_synonyms() {
+    let model = ["LASI", "RASI", "LPSI", "RPSI", "RTIB", "C7"];
+    let file = labels(&["Subj:LFWT", "r.ASIS", "L_PSIS", "RBWT", "RSHN", "C7"]);
+    let m = match_names(&model, &file).expect("matches");
+    assert_eq!(m.columns, vec![Some(0), Some(1), Some(2), Some(3), Some(4), Some(5)]);
+    assert_eq!(m.kinds[0], Some(MatchKind::Synonym));
+    assert_eq!(m.kinds[5], Some(MatchKind::Exact));
+    assert!(m.unmatched_model.is_empty() && m.unmatched_trial.is_empty());
+}
+
+#[test]
+fn a_stricter_pass_wins_over_a_synonym_and_profiles_add_synonyms() {
+    // `LASI` present exactly: the synonym `LFWT` stays unmatched rather than ambiguous.
+    let m = match_names(&["LASI"], &labels(&["LFWT", "LASI"])).expect("exact wins");
+    assert_eq!(m.columns, vec![Some(1)]);
+    assert_eq!(m.unmatched_trial, vec!["LFWT".to_string()]);
+    let mut syn = smocap::pipeline::matching::Synonyms::default();
+    assert!(!syn.equivalent("KNEE_OUT", "RKNE"));
+    syn.add_group(["KNEE_OUT", "RKNE"]);
+    assert!(syn.equivalent("knee.out", "R.Knee"));
+}

@@ -9,7 +9,8 @@ mod common;
 use common::shared;
 use smocap::io::osim::{read_ik_setup, read_scale_setup};
 use smocap::io::read_markers;
-use smocap::pipeline::{calibrate_subject, solve_trial, Context};
+use smocap::pipeline::calibration::calibrate_subject_with;
+use smocap::pipeline::{solve_trial, Context};
 use smocap::solve::FrameStatus;
 
 struct Dataset {
@@ -37,7 +38,8 @@ fn joint_solve_rmse(d: &Dataset) -> Option<(f64, f64)> {
     ctx.apply_ik_setup(&read_ik_setup(&p(d.ik_setup)).expect("ik setup")).expect("ik setup applies");
     let static_trial = read_markers(&p(d.static_trial)).expect("static");
     let trial = read_markers(&p(d.trial)).expect("trial");
-    let cal = calibrate_subject(&ctx, &[("static", &static_trial)]).expect("calibration");
+    // One morphology from the static trial and the motion together.
+    let cal = calibrate_subject_with(&ctx, &[("static", &static_trial)], &[("walk", &trial)]).expect("calibration");
     let ctx = ctx.with_marker_offsets(cal.marker_offsets.as_ref().expect("placement ran")).expect("placed");
     let r = solve_trial(&ctx, d.trial, &trial, &cal, 2).expect("solve");
     let solved: Vec<f64> =

@@ -294,7 +294,8 @@ fn the_lane_scheduler_on_the_cpu_takes_exactly_the_steps_of_the_per_frame_loop()
     let cal = calibrate_subject(&ctx, &[("t", &s.trial)]).unwrap();
     let matched = smocap::pipeline::trial::match_markers(&ctx, "t", &s.trial).unwrap();
     let obs = smocap::pipeline::trial::observations(&s.trial, &matched.columns);
-    let plain = plain_loop(&ctx, &obs, &cal);
+    // Trials are solved at the calibrated morphology: the plain loop gets the same pinned scales.
+    let plain = plain_loop(&ctx.pinned_to(&cal), &obs, &cal);
     // One lane (one segment): bit-identical, bridged frame aside.
     let r = solve_trial(&ctx, "t", &s.trial, &cal, 1).unwrap();
     for f in (0..150).filter(|&f| f != 40) {

@@ -11,6 +11,9 @@
 //! markerset, profile, scale_setup, ik_setup, place_markers, qp, units, up
 //! rate = 120.0                      # optional: frame rate (Hz) overriding the files'
 //! settings = { max_iterations = 30 } # optional: solver settings overridden (a profile's [solver] keys)
+//! height = 1.84                     # optional: every subject's height (m), mass (kg), sex
+//! subjects = { S01 = { height = 1.84, mass = 92.9, sex = "male" } }  # optional: per subject
+//! register = false                  # optional: keep the model's marker positions
 //! ```
 
 use crate::pipeline::convention::{InputOptions, Units, UpAxis};
@@ -138,9 +141,52 @@ pub struct Dataset {
     /// [`crate::solve::SolverSettings`]).
     #[serde(default)]
     pub settings: toml::Table,
+    /// Every subject's height (m), mass (kg) and sex, for the anthropometric prior.
+    pub height: Option<f64>,
+    pub mass: Option<f64>,
+    pub sex: Option<String>,
+    /// Per subject (by the name `subject` extracts): height, mass, sex, overriding the above.
+    #[serde(default)]
+    pub subjects: std::collections::BTreeMap<String, SubjectKeys>,
+    /// Marker registration in calibration (default true).
+    pub register: Option<bool>,
+}
+
+/// What is known of one subject, as `datasets.toml` writes it.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SubjectKeys {
+    pub height: Option<f64>,
+    pub mass: Option<f64>,
+    pub sex: Option<String>,
 }
 
 impl Dataset {
+    /// What is known of `subject`: its `subjects` entry over the dataset's keys; a value that
+    /// is not plausible (or an unknown sex) is an error naming the subject.
+    pub fn subject_info(&self, subject: &str) -> Result<crate::model::anthropometry::SubjectInfo, ConfigError> {
+        let own = self.subjects.get(subject).cloned().unwrap_or_default();
+        let invalid = |message: String| ConfigError::Invalid {
+            file: "datasets.toml".into(),
+            name: self.name.clone(),
+            message: format!("subject '{subject}': {message}"),
+        };
+        let sex = own
+            .sex
+            .as_deref()
+            .or(self.sex.as_deref())
+            .map(str::parse::<crate::model::anthropometry::Sex>)
+            .transpose()
+            .map_err(|e| invalid(e.to_string()))?;
+        let info = crate::model::anthropometry::SubjectInfo {
+            height_m: own.height.or(self.height),
+            mass_kg: own.mass.or(self.mass),
+            sex,
+        };
+        info.validate().map_err(|e| invalid(e.to_string()))?;
+        Ok(info)
+    }
+
     /// Resolves relative paths against `base` (the toml's folder).
     fn resolve(&mut self, base: &Path) {
         let abs = |p: &mut Option<PathBuf>| {
@@ -165,6 +211,8 @@ impl Dataset {
             ik_setup: self.ik_setup.clone(),
             static_trial,
             place_markers: self.place_markers,
+            no_register: self.register == Some(false),
+            subject: Default::default(),
             qp: self.qp,
         }
     }

@@ -10,7 +10,7 @@ use super::shard::{assign, Shard};
 use super::trial_job::{read_for, solve_and_write, Calibrated};
 use crate::pipeline::convention::InputOptions;
 use crate::pipeline::stats::P50P90;
-use crate::pipeline::subject::{calibrate_placed, prepare_subject};
+use crate::pipeline::subject::prepare_subject;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -366,7 +366,12 @@ fn subject(
     let fail_all = |why: String| -> Vec<TrialOutcome> {
         todo.iter().map(|(t, out, _)| failed(d, g, t, out, why.clone())).inspect(report).collect()
     };
-    let mut sub = match prepare_subject(&d.subject_files(g.static_trial.clone())) {
+    let mut files = d.subject_files(g.static_trial.clone());
+    match d.subject_info(&g.subject) {
+        Ok(info) => files.subject = info,
+        Err(e) => return [outcomes, fail_all(format!("subject setup: {e}"))].concat(),
+    }
+    let mut sub = match prepare_subject(&files) {
         Ok(s) => s,
         Err(e) => return [outcomes, fail_all(format!("subject setup: {e}"))].concat(),
     };
@@ -378,29 +383,32 @@ fn subject(
         sub.ctx.settings.qp = crate::solve::backend_for(sub.ctx.settings.qp, &sub.ctx.proxy);
     }
     let input = d.input_options();
-    // Calibrate on the static trial, else on the motion trials whose markers match the model's.
-    let cal_input: Vec<(String, crate::io::MarkerTrial)> = match &sub.static_path {
+    // Calibrate as `solve` does: the static trial (when there is one) and the motion trials whose
+    // markers match the model's, together (read for calibration, then again one at a time).
+    let statics: Vec<(String, crate::io::MarkerTrial)> = match &sub.static_path {
         Some(p) => match read_for(d, &sub.ctx, p, &input) {
             Ok(t) => vec![(p.display().to_string(), t)],
             Err(e) => return [outcomes, fail_all(format!("static trial: {e}"))].concat(),
         },
-        None => g
-            .trials
-            .iter()
-            .filter_map(|t| read_for(d, &sub.ctx, &t.path, &input).ok().map(|m| (t.rel.clone(), m)))
-            .filter(|(rel, m)| {
-                crate::pipeline::trial::match_markers(&sub.ctx, rel, m)
-                    .is_ok_and(|x| x.columns.iter().any(Option::is_some))
-            })
-            .collect(),
+        None => Vec::new(),
     };
-    let cal = if cal_input.is_empty() {
+    let motions: Vec<(String, crate::io::MarkerTrial)> = g
+        .trials
+        .iter()
+        .filter_map(|t| read_for(d, &sub.ctx, &t.path, &input).ok().map(|m| (t.rel.clone(), m)))
+        .filter(|(rel, m)| {
+            crate::pipeline::trial::match_markers(&sub.ctx, rel, m).is_ok_and(|x| x.columns.iter().any(Option::is_some))
+        })
+        .collect();
+    let cal = if statics.is_empty() && motions.is_empty() {
         Err("no trial to calibrate on".to_string())
     } else {
-        let refs: Vec<(&str, &crate::io::MarkerTrial)> = cal_input.iter().map(|(n, t)| (n.as_str(), t)).collect();
-        calibrate_placed(&sub.ctx, &refs).map_err(|e| format!("calibration failed: {e}"))
+        let s: Vec<(&str, &crate::io::MarkerTrial)> = statics.iter().map(|(n, t)| (n.as_str(), t)).collect();
+        let m: Vec<(&str, &crate::io::MarkerTrial)> = motions.iter().map(|(n, t)| (n.as_str(), t)).collect();
+        crate::pipeline::subject::calibrate_placed_with(&sub.ctx, &s, &m)
+            .map_err(|e| format!("calibration failed: {e}"))
     };
-    drop(cal_input);
+    drop((statics, motions));
     let cal = match cal {
         Ok((calibration, placed)) => {
             let ctx = placed.as_ref().unwrap_or(&sub.ctx);
@@ -411,7 +419,7 @@ fn subject(
                 ctx,
                 &calibration,
                 text.as_deref().map(|t| (t, name.as_str())),
-                crate::io::osim::MassScaling::default(),
+                crate::io::osim::MassScaling { subject_mass: ctx.subject.mass_kg, ..Default::default() },
             )
             .ok()
             .map(|(m, _)| m);

@@ -10,7 +10,8 @@
 //! within the record; the footer last; every offset in the footer and the indexes on the start
 //! of a record of the kind (and length) it names; every chunk's
 //! compression (none or zstd), its uncompressed size (at most [`MAX_CHUNK_BYTES`]) and its
-//! records, once decompressed (with the size checked against the declared one). Records of
+//! records, once decompressed (with the size checked against the declared one); the data
+//! section's CRC (data end record) and the summary's (footer), when recorded. Records of
 //! unknown opcodes are skipped by their length, as the specification says. Encoding-agnostic:
 //! message payloads are not looked into.
 
@@ -134,6 +135,22 @@ pub fn check(buf: &[u8]) -> Result<(), McapFormatError> {
     match starts.last_key_value() {
         Some((&o, &(0x02, n))) if o + n == len - 8 => {}
         _ => return Err(at(len - 8, "the last record is not a footer (truncated: the writer did not finish)")),
+    }
+    // The data section's and the summary's CRCs (when the writer recorded them: not 0).
+    let u32_at = |o: u64| u32::from_le_bytes(buf[o as usize..o as usize + 4].try_into().expect("4 bytes"));
+    let u64_at = |o: u64| u64::from_le_bytes(buf[o as usize..o as usize + 8].try_into().expect("8 bytes"));
+    if let Some((&end, _)) = starts.iter().find(|(_, &(op, n))| op == 0x0F && n >= 13) {
+        let want = u32_at(end + 9);
+        if want != 0 && crc32fast::hash(&buf[..end as usize]) != want {
+            return Err(at(end, "the data section's CRC does not match (the file is damaged)"));
+        }
+    }
+    let (&footer, _) = starts.last_key_value().expect("a footer");
+    let (summary_start, summary_crc) = (u64_at(footer + 9), u32_at(footer + 9 + 16));
+    if summary_start != 0 && summary_crc != 0 && summary_start <= footer {
+        if crc32fast::hash(&buf[summary_start as usize..footer as usize + 9 + 16]) != summary_crc {
+            return Err(at(summary_start, "the summary's CRC does not match (the file is damaged)"));
+        }
     }
     // Every offset that readers follow lands on the start of a record of the right kind and
     // length, so nothing is parsed that was not checked above.

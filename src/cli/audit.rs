@@ -32,10 +32,16 @@ pub struct AuditArgs {
     /// Write the report (per-subject errors of both methods, wins, real datasets) as JSON here.
     #[arg(long)]
     pub report_json: Option<PathBuf>,
+    /// Override a solver setting of the synthetic subjects' solves (`KEY=VALUE`, as `solve --set`).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
 }
 
 pub fn run(a: AuditArgs) -> anyhow::Result<u8> {
-    let ctx = Context::shipped()?;
+    let mut ctx = Context::shipped()?;
+    // The synthetic subjects calibrate on their static trial.
+    ctx.static_calibration = true;
+    super::solve::apply_set(&mut ctx, &a.set)?;
     let spec = SubjectSpec { motion_frames: a.frames.max(1), ..SubjectSpec::default() };
     let mut report = audit_synthetic(&ctx, a.subjects, a.seed, &spec);
     if !a.synthetic_only && a.datasets.is_file() {

@@ -2,7 +2,7 @@
 
 use crate::pipeline::report::{trial_report, Report};
 use crate::pipeline::solve_trial_with;
-use crate::pipeline::subject::{calibrate_placed, prepare_subject, Subject, SubjectFiles};
+use crate::pipeline::subject::{calibrate_placed_with, prepare_subject, Subject, SubjectFiles};
 use crate::pipeline::verdict::Verdict;
 use crate::solve::QpBackend;
 use crate::synth::Truth;
@@ -26,9 +26,27 @@ pub struct SolveArgs {
     /// `--markerset` / `--static` are not given.
     #[arg(long)]
     pub scale_setup: Option<PathBuf>,
-    /// Place the markers on the static trial after calibration (OpenSim's MarkerPlacer).
+    /// Place the markers on the static trial after calibration (OpenSim's MarkerPlacer)
+    /// instead of registering them.
     #[arg(long)]
     pub place_markers: bool,
+    /// Keep the model's marker positions: no marker registration in calibration.
+    #[arg(long)]
+    pub no_register: bool,
+    /// The subject's standing height (m): conditions the anthropometric prior.
+    #[arg(long)]
+    pub height: Option<f64>,
+    /// The subject's body mass (kg): conditions the anthropometric prior and goes into the
+    /// scaled model.
+    #[arg(long)]
+    pub mass: Option<f64>,
+    /// Override a solver setting (`KEY=VALUE`, a profile's `[solver]` key and TOML value, e.g.
+    /// `--set anthropometric_weight=2`); repeatable, applied after the profile and setups.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+    /// The subject's sex (selects the survey population of the anthropometric prior).
+    #[arg(long, value_enum)]
+    pub sex: Option<crate::model::anthropometry::Sex>,
     /// Static calibration trial; without one, frames of the motion trials are used.
     #[arg(long = "static")]
     pub static_trial: Option<PathBuf>,
@@ -92,6 +110,17 @@ fn read_trial(
     Ok((t, conv))
 }
 
+/// Applies `--set KEY=VALUE` overrides to the context's solver settings.
+pub fn apply_set(ctx: &mut crate::pipeline::Context, set: &[String]) -> anyhow::Result<()> {
+    if set.is_empty() {
+        return Ok(());
+    }
+    let table: toml::Table = toml::from_str(&set.join("\n")).context("--set: expected KEY=VALUE (a TOML value)")?;
+    ctx.settings = ctx.settings.with_overrides(&table).map_err(|e| anyhow::anyhow!("--set: {e}"))?;
+    ctx.settings.qp = crate::solve::backend_for(ctx.settings.qp, &ctx.proxy);
+    Ok(())
+}
+
 pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
     anyhow::ensure!(a.markerset.is_none() || a.model.is_some(), "--markerset needs --model");
     let files = SubjectFiles {
@@ -102,9 +131,12 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         ik_setup: a.ik_setup.clone(),
         static_trial: a.static_trial.clone(),
         place_markers: a.place_markers,
+        no_register: a.no_register,
+        subject: crate::model::anthropometry::SubjectInfo { height_m: a.height, mass_kg: a.mass, sex: a.sex },
         qp: a.qp,
     };
     let Subject { mut ctx, static_path, notes } = prepare_subject(&files)?;
+    apply_set(&mut ctx, &a.set)?;
     if let Some(mode) = a.presolve {
         ctx.settings.presolve = mode;
     }
@@ -146,20 +178,36 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
             Err(e) => report.push(Report::failed(&name, super::one_line(&e))),
         }
     }
-    let calibration_input: Vec<(&str, &crate::io::MarkerTrial)> = match (&static_path, &static_trial) {
+    // The subject's morphology from all its data: the static trial (when there is one) and
+    // frames of every motion trial.
+    let statics: Vec<(&str, &crate::io::MarkerTrial)> = match (&static_path, &static_trial) {
         (Some(p), Some(st)) => vec![(p.to_str().unwrap_or("static"), st)],
-        _ => loaded.iter().map(|(n, t, _)| (n.as_str(), t)).collect(),
+        _ => Vec::new(),
     };
-    let calibration = if calibration_input.is_empty() {
+    let motions: Vec<(&str, &crate::io::MarkerTrial)> = loaded.iter().map(|(n, t, _)| (n.as_str(), t)).collect();
+    let generic = ctx.clone();
+    let calibration = if statics.is_empty() && motions.is_empty() {
         None
     } else {
-        Some(calibrate_placed(&ctx, &calibration_input).map(|(c, placed)| {
+        Some(calibrate_placed_with(&ctx, &statics, &motions).map(|(c, placed)| {
             // Marker placement moved the subject's markers: solve with them.
             if let Some(p) = placed {
                 ctx = p;
             }
             c
         }))
+    };
+    let suspect = match &calibration {
+        Some(Ok(c)) => {
+            let cr = crate::pipeline::report::CalibrationReport::new(&generic, c);
+            eprintln!("{}", cr.summary());
+            for w in &cr.warnings {
+                eprintln!("warning: calibration: {w}");
+            }
+            report.calibration = Some(cr);
+            c.suspect()
+        }
+        _ => Vec::new(),
     };
     // The backend holds the model (on the GPU for wgpu): chosen once the markers are final.
     let (mut chosen, lanes) = a.backend.choose(&ctx, threads)?;
@@ -193,10 +241,16 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
                 }
                 let mut tr = trial_report(&ctx, &r, truth.as_ref());
                 tr.input = Some(conv.clone());
-                if let Verdict::Suspect(why) = &verdict {
+                // Suspect: the trial's frames (mostly at the iteration cap) or its subject's calibration.
+                let mut why: Vec<String> = verdict.reason().into_iter().collect();
+                if !suspect.is_empty() {
+                    why.push(format!("suspect calibration: {}", suspect.join("; ")));
+                }
+                if !why.is_empty() {
+                    let why = why.join("; ");
                     eprintln!("warning: {name}: suspect: {why}");
-                    tr.status = verdict.status().into();
-                    tr.error = Some(why.clone());
+                    tr.status = "suspect".into();
+                    tr.error = Some(why);
                 }
                 report.push(tr);
                 solved.push((t, r));

@@ -21,7 +21,7 @@ use crate::archive::config::Dataset;
 use crate::archive::discover::{discover, SubjectGroup};
 use crate::pipeline::device::{choose, BackendChoice, Chosen};
 use crate::pipeline::stats::{percentile, P50P90};
-use crate::pipeline::subject::{calibrate_placed, prepare_subject, read_trial};
+use crate::pipeline::subject::{calibrate_placed_with, prepare_subject, read_trial};
 use crate::pipeline::{solve_trial_with, Context};
 use crate::solve::FrameStatus;
 use serde::{Deserialize, Serialize};
@@ -338,11 +338,10 @@ fn bench_subject(d: &Dataset, g: &SubjectGroup, opt: &BenchOptions, b: &mut Data
             Err(e) => b.failed.push(format!("{}: {e}", t.rel)),
         }
     }
-    let cal_input: Vec<(&str, &crate::io::MarkerTrial)> = match &static_trial {
-        Some(t) => vec![("static", t)],
-        None => loaded.iter().map(|(n, m)| (n.as_str(), m)).collect(),
-    };
-    let (cal, placed) = match calibrate_placed(&sub.ctx, &cal_input) {
+    // As `solve` does: the static trial (when there is one) and the motion trials together.
+    let statics: Vec<(&str, &crate::io::MarkerTrial)> = static_trial.iter().map(|t| ("static", t)).collect();
+    let motions: Vec<(&str, &crate::io::MarkerTrial)> = loaded.iter().map(|(n, m)| (n.as_str(), m)).collect();
+    let (cal, placed) = match calibrate_placed_with(&sub.ctx, &statics, &motions) {
         Ok(c) => c,
         Err(e) => return fail_all(b, &format!("calibration failed: {e}")),
     };

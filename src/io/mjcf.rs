@@ -378,7 +378,7 @@ impl<'a> Builder<'a> {
             Some(f) => (Vector3::new(f[0], f[1], f[2]) + Vector3::new(f[3], f[4], f[5])) / 2.0,
             None => self.ctx.vec3(site, &a, "pos")?.unwrap_or_default(),
         };
-        self.markers.push(Marker { name: name.to_string(), body, offset, weight: 1.0, fixed: false });
+        self.markers.push(Marker { name: name.to_string(), body, offset, weight: 1.0, fixed: false, class: None });
         Ok(())
     }
 

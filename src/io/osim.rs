@@ -312,7 +312,14 @@ impl<'c, 'a> Builder<'c, 'a> {
             if self.markers.iter().any(|x| x.name == name) {
                 return Err(self.ctx.err(mk, format!("duplicate marker name '{name}'")));
             }
-            self.markers.push(Marker { name: name.to_string(), body: b, offset, weight: 1.0, fixed });
+            self.markers.push(Marker {
+                name: name.to_string(),
+                body: b,
+                offset,
+                weight: 1.0,
+                fixed: fixed.unwrap_or(false),
+                class: markers::class_of(fixed),
+            });
         }
         Ok(())
     }

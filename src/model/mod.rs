@@ -14,6 +14,7 @@
 //! - The state vector is `y = [q; s]`: `nq` coordinates, then `3·nb` scale factors ordered
 //!   body-major (`s[3b + axis]`).
 
+pub mod anthropometry;
 pub mod function;
 pub mod profile;
 pub mod proxy;
@@ -102,6 +103,61 @@ pub struct Marker {
     /// Kept where it is by marker placement (OpenSim `<fixed>`); false by default, as in OpenSim.
     #[serde(default)]
     pub fixed: bool,
+    /// The class the model file gives it (OpenSim `<fixed>true</fixed>`: anatomical,
+    /// `<fixed>false</fixed>`: tracking); `None` when the file says nothing. See
+    /// [`marker_classes`] for how registration resolves it.
+    #[serde(default)]
+    pub class: Option<MarkerClass>,
+}
+
+/// How marker registration treats a marker.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MarkerClass {
+    /// On a bony landmark: its offset stays close to the model's and informs the scales.
+    Anatomical,
+    /// On a cluster, wand or soft tissue: its offset is estimated freely within its bound.
+    Tracking,
+}
+
+/// Each marker's registration class: the profile's lists (`tracking`, `anatomical`) first, then
+/// the model file's flag; a marker the file does not flag is anatomical, except that when the
+/// file flags none of its markers, names ending in a digit that share their prefix (of three
+/// characters or more, so that vertebrae such as `T10`, `T12` are not one) with another such name
+/// (`r_thigh1` … `r_thigh5`) form a cluster of tracking markers.
+pub fn marker_classes(model: &Model, tracking: &[String], anatomical: &[String]) -> Vec<MarkerClass> {
+    let none_flagged = model.markers.iter().all(|m| m.class.is_none());
+    let stem = |n: &str| n.trim_end_matches(|c: char| c.is_ascii_digit()).to_string();
+    let numbered: Vec<Option<String>> = model
+        .markers
+        .iter()
+        .map(|m| (m.name.ends_with(|c: char| c.is_ascii_digit())).then(|| stem(&m.name)).filter(|s| s.len() >= 3))
+        .collect();
+    model
+        .markers
+        .iter()
+        .enumerate()
+        .map(|(i, m)| {
+            if tracking.contains(&m.name) {
+                return MarkerClass::Tracking;
+            }
+            if anatomical.contains(&m.name) {
+                return MarkerClass::Anatomical;
+            }
+            if let Some(c) = m.class {
+                return c;
+            }
+            let cluster = none_flagged
+                && numbered[i]
+                    .as_ref()
+                    .is_some_and(|s| numbered.iter().enumerate().any(|(j, t)| j != i && t.as_ref() == Some(s)));
+            if cluster {
+                MarkerClass::Tracking
+            } else {
+                MarkerClass::Anatomical
+            }
+        })
+        .collect()
 }
 
 /// A coordinate that is a function of another (OpenSim `CoordinateCouplerConstraint`, MuJoCo

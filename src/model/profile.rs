@@ -27,6 +27,9 @@
 //! default_weight = 1.0
 //! weights = { LASI = 2.0 }
 //! exclude = ["RBAK"]
+//! synonyms = [["LFWT", "LASI"]]    # file labels that mean a model marker (besides the built-ins)
+//! tracking = ["RTHI"]              # marker classes for registration (override the model's flags)
+//! anatomical = ["RKNE"]
 //!
 //! [solver]                         # overrides of the solver settings (see solve::SolverSettings)
 //! max_iterations = 20
@@ -99,6 +102,18 @@ pub struct MarkerSettings {
     /// Markers never used by the solver.
     #[serde(default)]
     pub exclude: Vec<String>,
+    /// Extra groups of marker names that mean the same marker (file label ↔ model marker), added
+    /// to the built-in table of `pipeline::matching` (Plug-in Gait, CMU, OpenSim spellings).
+    #[serde(default)]
+    pub synonyms: Vec<Vec<String>>,
+    /// Markers registered as tracking markers (clusters, wands: offsets estimated freely within
+    /// their bound), overriding the model file's `<fixed>` flags and the cluster-name rule.
+    #[serde(default)]
+    pub tracking: Vec<String>,
+    /// Markers registered as anatomical markers (bony landmarks: offsets held close to the
+    /// model's), overriding the model file and the cluster-name rule.
+    #[serde(default)]
+    pub anatomical: Vec<String>,
 }
 
 /// A solver profile (see the module docs for the format).
@@ -143,21 +158,88 @@ impl Profile {
         toml::from_str(text).map_err(|e| ProfileError::Parse { path: path.into(), message: e.to_string() })
     }
 
-    /// The profile used when none is given: every coordinate its own proxy, every body its own
-    /// uniform scale factor.
+    /// The profile used when none is given: every coordinate its own proxy, and scale groups
+    /// that match what marker data can observe ([`auto_scale_groups`]).
     pub fn default_for(model: &crate::model::Model) -> Profile {
-        Profile {
-            scale_groups: model
-                .bodies
-                .iter()
-                .map(|b| ScaleGroup {
-                    name: b.name.clone(),
-                    bodies: vec![b.name.clone()],
-                    axes: ScaleAxes::Uniform,
-                    range: default_scale_range(),
-                })
-                .collect(),
-            ..Profile::default()
+        Profile { scale_groups: auto_scale_groups(model), ..Profile::default() }
+    }
+}
+
+/// The side-free name of a body (`femur_r`, `femur_R`, `r_femur`, `femurRight` → `femur`), and
+/// whether it had a side.
+pub fn side_free(name: &str) -> (String, bool) {
+    for suf in ["_r", "_l", "_R", "_L", "Right", "Left", "_right", "_left"] {
+        if let Some(stem) = name.strip_suffix(suf).filter(|s| !s.is_empty()) {
+            return (stem.to_string(), true);
         }
     }
+    for pre in ["r_", "l_", "R_", "L_", "right_", "left_"] {
+        if let Some(stem) = name.strip_prefix(pre).filter(|s| !s.is_empty()) {
+            return (stem.to_string(), true);
+        }
+    }
+    (name.to_string(), false)
+}
+
+/// Scale groups for a model without a profile: left and right share their factors (`femur_r`
+/// with `femur_l`), and a body without markers of its own joins the group of the body whose
+/// markers determine it — the first marked body down a chain of single children (talus →
+/// calcn, ulna → radius), else its parent's (patella → femur, toes → calcn, hand → radius), as
+/// OpenCap's scaling setup ties them. One factor per axis (`xyz`), which calibration's
+/// anisotropy penalty keeps close; range [0.5, 2].
+pub fn auto_scale_groups(model: &crate::model::Model) -> Vec<ScaleGroup> {
+    let nb = model.bodies.len();
+    let mut marked = vec![false; nb];
+    for m in &model.markers {
+        marked[m.body] = true;
+    }
+    let children = |b: usize| (0..nb).filter(move |&c| model.bodies[c].parent == Some(b));
+    let mut anchor: Vec<usize> = (0..nb).collect();
+    for b in 0..nb {
+        if marked[b] || model.markers.is_empty() {
+            continue;
+        }
+        // Down a chain of single children.
+        let mut cur = b;
+        let mut found = None;
+        for _ in 0..4 {
+            let kids: Vec<usize> = children(cur).collect();
+            if kids.len() != 1 {
+                break;
+            }
+            cur = kids[0];
+            if marked[cur] {
+                found = Some(cur);
+                break;
+            }
+        }
+        if found.is_none() {
+            // Up to the nearest marked ancestor.
+            let mut up = model.bodies[b].parent;
+            while let Some(p) = up {
+                if marked[p] {
+                    found = Some(p);
+                    break;
+                }
+                up = model.bodies[p].parent;
+            }
+        }
+        if let Some(a) = found {
+            anchor[b] = a;
+        }
+    }
+    let mut groups: Vec<ScaleGroup> = Vec::new();
+    for b in 0..nb {
+        let key = side_free(&model.bodies[anchor[b]].name).0;
+        match groups.iter_mut().find(|g| g.name == key) {
+            Some(g) => g.bodies.push(model.bodies[b].name.clone()),
+            None => groups.push(ScaleGroup {
+                name: key,
+                bodies: vec![model.bodies[b].name.clone()],
+                axes: ScaleAxes::Xyz,
+                range: default_scale_range(),
+            }),
+        }
+    }
+    groups
 }

@@ -48,6 +48,13 @@ pub struct Context {
     /// The model's up direction in its world frame (opposite to its gravity); `None` when the
     /// model has no gravity.
     pub up: Option<nalgebra::Vector3<f64>>,
+    /// What is known of the subject (sex, height, mass): conditions the anthropometric prior.
+    pub subject: crate::model::anthropometry::SubjectInfo,
+    /// The landmark definitions that measure the prior's dimensions on this model, with their
+    /// source; `None` when no shipped file fits the model and none was given.
+    pub landmarks: Option<(String, crate::model::anthropometry::Landmarks)>,
+    /// Whether calibration runs on a static trial (else on frames of the motion trials).
+    pub static_calibration: bool,
     /// Where the model and profile came from (for reports).
     pub model_source: String,
     /// What the model importer ignored or approximated.
@@ -82,7 +89,8 @@ impl Context {
                 message: format!("default_weight = {w}: weights must be finite and ≥ 0"),
             });
         }
-        for name in profile.markers.weights.keys().chain(&profile.markers.exclude) {
+        let m = &profile.markers;
+        for name in m.weights.keys().chain(&m.exclude).chain(&m.tracking).chain(&m.anatomical) {
             if model.marker_index(name).is_none() {
                 return Err(ContextError::UnknownMarker {
                     path: profile_name.into(),
@@ -103,7 +111,11 @@ impl Context {
             })
             .collect();
         let nq = model.nq();
+        let landmarks = crate::model::anthropometry::Landmarks::shipped_for(&model);
         Ok(Context {
+            subject: Default::default(),
+            landmarks,
+            static_calibration: false,
             model,
             profile,
             proxy,
@@ -171,6 +183,24 @@ impl Context {
         Ok(Context { model, proxy, ..self.clone() })
     }
 
+    /// The subject as its trials are solved: the calibration's morphology (scale proxies pinned
+    /// to their calibrated values, so every frame of every trial has the one morphology) and
+    /// its markers where calibration registered or placed them.
+    pub fn pinned_to(&self, cal: &crate::solve::Calibration) -> Context {
+        let mut ctx = self.clone();
+        if let Some(o) = &cal.marker_offsets {
+            for (m, o) in ctx.model.markers.iter_mut().zip(o) {
+                m.offset = *o;
+            }
+        }
+        for (px, &v) in ctx.proxy.proxies.iter_mut().zip(&cal.proxies) {
+            if px.kind == crate::model::proxy::ProxyKind::Scale {
+                px.range = (v, v);
+            }
+        }
+        ctx
+    }
+
     /// The subject set up as an OpenSim Scale tool setup says: its scale groups replace the
     /// profile's, marker placement follows its `MarkerPlacer`, and the placer's task weights
     /// weight the static trial (markers without a task keep their weight). Bodies the model
@@ -208,6 +238,8 @@ impl Context {
             .map_err(|e| ContextError::Settings { path: setup_name.into(), message: e.to_string() })?;
         let mut settings = self.settings.clone();
         settings.marker_placement = setup.place_markers;
+        // The setup's MarkerPlacer decides what happens to the markers, not registration.
+        settings.registration = false;
         settings.qp = crate::solve::backend_for(settings.qp, &proxy);
         let calibration_weights = self
             .model
@@ -216,7 +248,10 @@ impl Context {
             .zip(&self.calibration_weights)
             .map(|(m, &w)| setup.static_weights.get(&m.name).copied().unwrap_or(w))
             .collect();
-        Ok(Context { profile, proxy, settings, calibration_weights, warnings, ..self.clone() })
+        let mut subject = self.subject;
+        subject.height_m = subject.height_m.or(setup.height_m);
+        subject.mass_kg = subject.mass_kg.or(setup.mass_kg);
+        Ok(Context { profile, proxy, settings, calibration_weights, warnings, subject, ..self.clone() })
     }
 
     /// Tracking arrays (length ny) holding only the coordinate targets: `(reference, weights)`.
@@ -226,6 +261,20 @@ impl Context {
         r.resize(ny, 0.0);
         w.resize(ny, 0.0);
         (r, w)
+    }
+
+    /// Each marker's registration class ([`crate::model::marker_classes`]).
+    pub fn marker_classes(&self) -> Vec<crate::model::MarkerClass> {
+        crate::model::marker_classes(&self.model, &self.profile.markers.tracking, &self.profile.markers.anatomical)
+    }
+
+    /// The marker-name synonyms: the built-in table plus the profile's `[markers] synonyms`.
+    pub fn synonyms(&self) -> super::matching::Synonyms {
+        let mut s = super::matching::Synonyms::default();
+        for g in &self.profile.markers.synonyms {
+            s.add_group(g.iter().map(String::as_str));
+        }
+        s
     }
 
     /// Evaluator over this context's model and proxy map.

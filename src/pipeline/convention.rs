@@ -13,7 +13,7 @@
 //! are left as they are and the report says so. The data are then rotated by the smallest proper
 //! rotation (det +1) taking their up onto the model's (e.g. Z-up → Y-up: `(x, y, z) → (x, z, −y)`).
 
-use super::matching::match_names;
+use super::matching::match_names_with;
 use super::Context;
 use crate::io::markers::units_to_metres;
 use crate::io::MarkerTrial;
@@ -169,6 +169,18 @@ pub fn conform_trial(ctx: &Context, trial: &mut MarkerTrial, opt: &InputOptions)
     };
     let data_up = if let Some(a) = opt.up {
         out.up_source = "command line".into();
+        // A confident detection (the fits agree within 15°) that says otherwise is worth a word.
+        if let Some(d) =
+            fit.as_ref().and_then(|f| f.up_of(&model_up)).and_then(|u| nearest_axis(&u, 15f64.to_radians()))
+        {
+            if (d - a.vector()).norm() > 1e-9 {
+                out.notes.push(format!(
+                    "warning: --up {} contradicts the up axis the rigid fits detect ({}); check the data's axes",
+                    axis_name(&a.vector()),
+                    axis_name(&d)
+                ));
+            }
+        }
         Some(a.vector())
     } else {
         match &fit {
@@ -220,7 +232,7 @@ impl Fit {
 
     fn new(ctx: &Context, trial: &MarkerTrial) -> Option<Fit> {
         let names: Vec<&str> = ctx.model.markers.iter().map(|m| m.name.as_str()).collect();
-        let map = match_names(&names, &trial.labels).ok()?.columns;
+        let map = match_names_with(&names, &trial.labels, &ctx.synonyms()).ok()?.columns;
         let count = |f: usize| map.iter().filter(|c| c.and_then(|c| trial.position(f, c)).is_some()).count();
         let counts: Vec<usize> = (0..trial.n_frames()).map(count).collect();
         let most = counts.iter().copied().max().unwrap_or(0);

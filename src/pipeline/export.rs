@@ -138,7 +138,8 @@ pub fn write_scaled_model(
     let text = osim_file.map(|p| std::fs::read_to_string(p).map_err(io(p))).transpose()?;
     let name = osim_file.map(|p| p.display().to_string()).unwrap_or_default();
     let source = text.as_deref().map(|t| (t, name.as_str()));
-    let (osim_text, warnings) = scaled_osim(ctx, calibration, source, MassScaling::default())?;
+    let mass = MassScaling { subject_mass: ctx.subject.mass_kg, ..MassScaling::default() };
+    let (osim_text, warnings) = scaled_osim(ctx, calibration, source, mass)?;
     std::fs::write(out, osim_text).map_err(io(out))?;
     let set_path = out.with_extension("scaleset.xml");
     let set = osim::format_scale_set(&ctx.model, &body_scales(ctx, calibration)?);

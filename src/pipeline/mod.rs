@@ -2,6 +2,7 @@
 //! (calibration, warm-started frames, gap bridging, segments in parallel), reports, and export to
 //! OpenSim (`.mot` motions, scaled `.osim` models).
 
+pub mod calibration;
 pub mod context;
 pub mod convention;
 pub mod device;

@@ -95,8 +95,79 @@ pub struct Report {
     /// Units and up axis of the static trial, when one was given.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub static_input: Option<InputConventions>,
+    /// The subject's calibration: morphology against its priors, registration, time.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<CalibrationReport>,
     pub trials: Vec<TrialReport>,
     pub totals: Totals,
+}
+
+/// What calibration found, for the report.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct CalibrationReport {
+    /// "ok", or "suspect" (then `warnings` says why, and no trial counts as ok).
+    pub status: String,
+    pub warnings: Vec<String>,
+    pub frames: usize,
+    pub iterations: u32,
+    /// Wall time (s).
+    pub seconds: f64,
+    /// Mean marker RMSE over the calibration frames (mm).
+    pub rmse_mm: f64,
+    /// Markers whose offsets were registered.
+    pub registered_markers: usize,
+    /// How far registration or placement moved each marker from the model's position (mm, at
+    /// the subject's scale), largest first.
+    pub marker_moves_mm: Vec<(String, f64)>,
+    /// Scales with their z-scores, dimensions against the prior, stature.
+    pub prior: crate::solve::prior::PriorReport,
+}
+
+impl CalibrationReport {
+    /// One line for stderr.
+    pub fn summary(&self) -> String {
+        let stature = self.prior.stature_m.map_or(String::new(), |h| format!(", stature {h:.3} m"));
+        let worst = self.prior.scales.iter().map(|s| s.z.abs()).fold(0.0, f64::max);
+        format!(
+            "calibration: {} frames, {} iterations, {:.2} s, RMSE {:.2} mm, {} markers registered{stature}, largest |z| of a scale {worst:.2}: {}",
+            self.frames, self.iterations, self.seconds, self.rmse_mm, self.registered_markers, self.status
+        )
+    }
+
+    /// The report of `cal` for the subject `ctx` (its generic markers).
+    pub fn new(ctx: &Context, cal: &crate::solve::Calibration) -> CalibrationReport {
+        let warnings = cal.warnings();
+        let y = ctx.proxy.state(&cal.proxies);
+        let mut moves: Vec<(String, f64)> = match &cal.marker_offsets {
+            Some(o) => ctx
+                .model
+                .markers
+                .iter()
+                .zip(o)
+                .map(|(m, o)| {
+                    let s = nalgebra::Vector3::new(
+                        y[ctx.model.scale_index(m.body, 0)],
+                        y[ctx.model.scale_index(m.body, 1)],
+                        y[ctx.model.scale_index(m.body, 2)],
+                    );
+                    (m.name.clone(), (o - m.offset).component_mul(&s).norm() * 1e3)
+                })
+                .collect(),
+            None => Vec::new(),
+        };
+        moves.sort_by(|a, b| b.1.total_cmp(&a.1));
+        CalibrationReport {
+            status: if cal.suspect().is_empty() { "ok" } else { "suspect" }.into(),
+            warnings,
+            frames: cal.frames,
+            iterations: cal.iterations,
+            seconds: cal.seconds,
+            rmse_mm: cal.rmse_m * 1e3,
+            registered_markers: cal.registered,
+            marker_moves_mm: moves,
+            prior: cal.prior.clone(),
+        }
+    }
 }
 
 impl Report {
@@ -112,6 +183,7 @@ impl Report {
             model: ctx.model_source.clone(),
             settings: ctx.settings.clone(),
             static_input: None,
+            calibration: None,
             trials: Vec::new(),
             totals: Totals::default(),
         }

@@ -167,6 +167,9 @@ pub fn solve_trial_streaming(
     sink: &mut FrameSink<'_>,
 ) -> Result<StreamedTrial, TrialError> {
     let start = Instant::now();
+    // One morphology: every frame is solved at the calibrated scales and marker offsets.
+    let pinned = ctx.pinned_to(calibration);
+    let ctx = &pinned;
     let matched = match_markers(ctx, name, trial)?;
     let map = &matched.columns;
     if map.iter().all(Option::is_none) {

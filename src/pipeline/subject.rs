@@ -41,6 +41,11 @@ pub struct SubjectFiles {
     pub static_trial: Option<PathBuf>,
     /// Place the markers on the static trial after calibration.
     pub place_markers: bool,
+    /// Keep the model's marker positions (no registration).
+    pub no_register: bool,
+    /// What is known of the subject (conditions the anthropometric prior; a Scale setup's
+    /// height and mass fill what is not given).
+    pub subject: crate::model::anthropometry::SubjectInfo,
     pub qp: Option<QpBackend>,
 }
 
@@ -87,7 +92,10 @@ pub fn prepare_subject(f: &SubjectFiles) -> Result<Subject, SetupError> {
         (None, Some(p)) => return Err(SetupError::StaticMissing { path: p.display().to_string() }),
         (None, None) => None,
     };
+    f.subject.validate().map_err(TrialError::from)?;
     let mut ctx = load_context(f.model.as_deref(), markerset.as_deref(), f.profile.as_deref())?;
+    ctx.subject = f.subject;
+    ctx.static_calibration = static_path.is_some();
     if f.model.is_some() {
         notes.extend(ctx.warnings.iter().map(|w| format!("warning: {w}")));
     }
@@ -98,6 +106,9 @@ pub fn prepare_subject(f: &SubjectFiles) -> Result<Subject, SetupError> {
     }
     if f.place_markers {
         ctx.settings.marker_placement = true;
+    }
+    if f.no_register {
+        ctx.settings.registration = false;
     }
     if let Some(qp) = f.qp {
         ctx.settings.qp = crate::solve::backend_for(qp, &ctx.proxy);
@@ -145,6 +156,18 @@ pub fn calibrate_placed(
     inputs: &[(&str, &MarkerTrial)],
 ) -> Result<(Calibration, Option<Context>), SetupError> {
     let c = calibrate_subject(ctx, inputs)?;
+    let placed = c.marker_offsets.as_ref().map(|o| ctx.with_marker_offsets(o)).transpose()?;
+    Ok((c, placed))
+}
+
+/// [`calibrate_placed`] on the subject's static trials and motion trials together
+/// ([`super::calibration::calibrate_subject_with`]).
+pub fn calibrate_placed_with(
+    ctx: &Context,
+    statics: &[(&str, &MarkerTrial)],
+    motions: &[(&str, &MarkerTrial)],
+) -> Result<(Calibration, Option<Context>), SetupError> {
+    let c = super::calibration::calibrate_subject_with(ctx, statics, motions)?;
     let placed = c.marker_offsets.as_ref().map(|o| ctx.with_marker_offsets(o)).transpose()?;
     Ok((c, placed))
 }

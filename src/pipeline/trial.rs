@@ -4,15 +4,14 @@
 //! parallel (each cold-started), frames with too few markers reported and bridged from their
 //! neighbours.
 
-use super::matching::{match_names, MarkerMatch, MatchError};
+use super::matching::{match_names_with, MarkerMatch, MatchError};
 use super::stats::{GapStats, MarkerGaps};
 use super::Context;
 use crate::io::MarkerTrial;
-use crate::kinematics::assembly::FrameProblem;
 use crate::kinematics::backend::BackendError;
-use crate::solve::calibrate::track;
-use crate::solve::placement::place_markers;
-use crate::solve::{calibrate, make_qp, Calibration, FrameSolver, FrameStats};
+use crate::solve::{Calibration, FrameStats};
+
+pub use super::calibration::calibrate_subject;
 
 /// An error from a frame sink (e.g. writing the frame failed).
 pub type SinkError = Box<dyn std::error::Error + Send + Sync>;
@@ -34,6 +33,10 @@ pub enum TrialError {
     Backend { trial: String, source: BackendError },
     #[error("trial '{trial}': frame {frame}: {source}")]
     Output { trial: String, frame: usize, source: SinkError },
+    #[error("trial '{trial}': {message}")]
+    Implausible { trial: String, message: String },
+    #[error(transparent)]
+    Anthropometry(#[from] crate::model::anthropometry::AnthropometryError),
 }
 
 /// Result of one trial.
@@ -68,7 +71,8 @@ pub struct TrialResult {
 /// names the trial in errors.
 pub fn match_markers(ctx: &Context, name: &str, trial: &MarkerTrial) -> Result<MarkerMatch, TrialError> {
     let names: Vec<&str> = ctx.model.markers.iter().map(|m| m.name.as_str()).collect();
-    match_names(&names, &trial.labels).map_err(|source| TrialError::Matching { trial: name.into(), source })
+    match_names_with(&names, &trial.labels, &ctx.synonyms())
+        .map_err(|source| TrialError::Matching { trial: name.into(), source })
 }
 
 /// Missing data of the matched markers; `below_min` frames had too few markers to solve.
@@ -102,83 +106,6 @@ pub fn observations(trial: &MarkerTrial, map: &[Option<usize>]) -> Vec<f64> {
         }
     }
     out
-}
-
-/// Markers observed in a frame that the solver uses (weight > 0).
-fn observed_count(obs: &[f64], weights: &[f64]) -> usize {
-    obs.chunks_exact(3).zip(weights).filter(|(c, &w)| w > 0.0 && c.iter().all(|v| !v.is_nan())).count()
-}
-
-/// Up to `k` frames spread evenly over those with the most observed markers.
-fn calibration_frames(obs: &[f64], weights: &[f64], stride: usize, k: usize, min: usize) -> Vec<usize> {
-    let counts: Vec<usize> = obs.chunks(stride).map(|o| observed_count(o, weights)).collect();
-    let best = counts.iter().copied().max().unwrap_or(0);
-    let good: Vec<usize> = (0..counts.len()).filter(|&f| counts[f] >= min && counts[f] + 2 >= best).collect();
-    if good.is_empty() || k == 0 {
-        return good;
-    }
-    let n = good.len().min(k);
-    (0..n).map(|i| good[(i * good.len()) / n + good.len() / (2 * n)]).collect()
-}
-
-/// Calibrates one subject's morphology from frames pooled over `trials` (a static trial, or
-/// the motion trials themselves).
-pub fn calibrate_subject(ctx: &Context, trials: &[(&str, &MarkerTrial)]) -> Result<Calibration, TrialError> {
-    let settings = &ctx.settings;
-    let stride = 3 * ctx.model.markers.len();
-    let per_trial = settings.calibration_frames.div_ceil(trials.len().max(1));
-    let eval = ctx.evaluator();
-    // With placement, markers flagged fixed alone inform the scales when the model flags any.
-    let placing = settings.marker_placement;
-    let any_fixed = ctx.model.markers.iter().any(|m| m.fixed);
-    let weights: Vec<f64> = ctx
-        .model
-        .markers
-        .iter()
-        .zip(&ctx.calibration_weights)
-        .map(|(m, &w)| if placing && any_fixed && !m.fixed { 0.0 } else { w })
-        .collect();
-    // Coordinate targets (IK coordinate tasks) hold in calibration too.
-    let (coord_ref, coord_w) = ctx.coordinate_tracking();
-    let template =
-        FrameProblem { observed: &[], marker_weights: &weights, tracking_ref: &coord_ref, tracking_weights: &coord_w };
-    let mut solver = FrameSolver::new(&eval, settings.clone(), make_qp(settings.qp));
-    let p0 = ctx.proxy.default_proxies();
-    let mut pooled: Vec<f64> = Vec::new();
-    let mut starts: Vec<Vec<f64>> = Vec::new();
-    for (name, t) in trials {
-        let map = match_markers(ctx, name, t)?.columns;
-        if map.iter().all(Option::is_none) {
-            return Err(no_match(ctx, name, t));
-        }
-        let o = observations(t, &map);
-        let chosen = calibration_frames(&o, &weights, stride, per_trial, settings.min_markers);
-        let Some(&last) = chosen.last() else { continue };
-        // Track from the first frame to the last chosen one so that every chosen frame starts
-        // from a pose continuous with the motion (a cold start far into a motion can land in a
-        // wrong local minimum).
-        let first = (0..=last)
-            .find(|&f| observed_count(&o[f * stride..(f + 1) * stride], &weights) >= settings.min_markers)
-            .unwrap_or(0);
-        let slices: Vec<&[f64]> = (first..=last).map(|f| &o[f * stride..(f + 1) * stride]).collect();
-        let tracked = track(&mut solver, &slices, &template, &p0);
-        for f in chosen {
-            pooled.extend_from_slice(&o[f * stride..(f + 1) * stride]);
-            starts.push(tracked[f - first].clone());
-        }
-    }
-    if pooled.is_empty() {
-        let trial = trials.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ");
-        return Err(TrialError::NothingToCalibrate { trial, min: settings.min_markers });
-    }
-    let slices: Vec<&[f64]> = pooled.chunks(stride).collect();
-    let mut cal = calibrate(&mut solver, &slices, &template, &p0, &starts);
-    if placing {
-        let movable: Vec<bool> = ctx.model.markers.iter().map(|m| !m.fixed).collect();
-        let placed = place_markers(&ctx.model, &ctx.proxy, &slices, &cal.frame_proxies, &movable);
-        cal.marker_offsets = Some(placed.iter().zip(&ctx.model.markers).map(|(p, m)| p.unwrap_or(m.offset)).collect());
-    }
-    Ok(cal)
 }
 
 pub(crate) fn no_match(ctx: &Context, name: &str, trial: &MarkerTrial) -> TrialError {

@@ -12,13 +12,17 @@
 //! symmetry); the poses follow by back-substitution, clipped to their ranges. A step is accepted
 //! when the total objective decreases. A weak prior pulls unobservable scales toward 1.
 
-use super::init::cold_start;
+use super::init::multi_start;
+use super::prior::{GlobalTerm, Globals};
 use super::qp::{BoxQp, ClarabelQp, LinearConstraints, QpProblem, QpSolver};
+use super::settings::SolverSettings;
 use super::trqp::FrameSolver;
-use crate::kinematics::assembly::FrameProblem;
+use crate::kinematics::assembly::{EvalWorkspace, Evaluator, FrameProblem};
+use crate::kinematics::cpu;
 use crate::model::proxy::ProxyKind;
 use crate::model::proxy::ProxyMap;
-use nalgebra::{DMatrix, DVector};
+use crate::model::Model;
+use nalgebra::{DMatrix, DVector, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// What calibration found.
@@ -29,45 +33,421 @@ pub struct Calibration {
     pub proxies: Vec<f64>,
     /// Frames used.
     pub frames: usize,
-    /// Outer iterations run.
+    /// Outer iterations run (all stages).
     pub iterations: u32,
     /// Mean marker RMSE over the calibration frames (m).
     pub rmse_m: f64,
+    /// Markers whose offsets were registered.
+    #[serde(default)]
+    pub registered: usize,
+    /// Wall time of the calibration (s).
+    #[serde(default)]
+    pub seconds: f64,
+    /// The calibrated subject against its priors: each scale's z-score, bounds, stature.
+    #[serde(default)]
+    pub prior: super::prior::PriorReport,
     /// Final proxies of every calibration frame (shared scales, own pose).
     #[serde(skip)]
     pub frame_proxies: Vec<Vec<f64>>,
-    /// Every model marker's unit-scale offset (body frame, m) after marker placement; `None`
-    /// when placement did not run.
+    /// Every model marker's unit-scale offset (body frame, m) after registration or marker
+    /// placement; `None` when the offsets stayed the model's.
     #[serde(skip)]
-    pub marker_offsets: Option<Vec<nalgebra::Vector3<f64>>>,
+    pub marker_offsets: Option<Vec<Vector3<f64>>>,
 }
 
-/// Calibrates the scale proxies on `frames` (observed marker arrays, `3·marker + axis`, NaN gaps).
-/// `frame_template` supplies weights and tracking arrays (its `observed` is ignored). `starts`
-/// gives each frame's initial proxies (see [`track`]); their scale entries are replaced by `p0`'s.
+impl Calibration {
+    /// Why this calibration cannot be trusted (empty when it can): a non-finite result, or a
+    /// scale factor at an end of its range (the data could not determine it, or pulled it
+    /// somewhere a person is not).
+    pub fn suspect(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        if self.proxies.iter().any(|v| !v.is_finite()) || !self.rmse_m.is_finite() {
+            out.push("the calibration is not finite".to_string());
+        }
+        for s in self.prior.scales.iter().filter(|s| s.at_bound) {
+            out.push(format!("scale {} = {:.3} is at its bound [{}, {}]", s.name, s.value, s.range.0, s.range.1));
+        }
+        out
+    }
+
+    /// [`Calibration::suspect`], plus scales beyond 3 standard deviations of their prior.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut out = self.suspect();
+        for s in self.prior.scales.iter().filter(|s| s.z.abs() > 3.0) {
+            let of = s
+                .dimension
+                .as_deref()
+                .map_or("the stature-ratio prior".to_string(), |d| format!("its dimension '{d}'"));
+            out.push(format!("scale {} = {:.3} is {:.1} standard deviations from {of}", s.name, s.value, s.z));
+        }
+        out
+    }
+}
+
+/// One joint calibration: shared scales `s`, per-frame poses `q_k` and the registered markers'
+/// offsets `o`, minimising
+/// `Σ_k ½ Σ_m w_m ‖x̂_m(q_k, s, o_m) − x_km‖² + Σ_k (coordinate targets) + Σ terms(s, o)`.
+pub struct JointProblem<'a> {
+    /// The model; its marker offsets are replaced by the state's.
+    pub model: &'a Model,
+    pub proxy: &'a ProxyMap,
+    pub settings: &'a SolverSettings,
+    /// Observed markers per frame (`3·marker + axis`, m, NaN gaps).
+    pub frames: &'a [&'a [f64]],
+    /// Marker weights of each frame (a static trial's and a motion's may differ).
+    pub weights: &'a [&'a [f64]],
+    /// Coordinate targets (length ny) and weights.
+    pub tracking_ref: &'a [f64],
+    pub tracking_weights: &'a [f64],
+    /// Markers whose offsets are unknowns.
+    pub registered: &'a [bool],
+    /// Centre of each marker's offset bound (unit-scale body frame, m).
+    pub reference: &'a [Vector3<f64>],
+    pub bound_m: f64,
+    pub terms: &'a [&'a dyn GlobalTerm],
+}
+
+/// The unknowns of a [`JointProblem`].
+#[derive(Clone, Debug)]
+pub struct JointState {
+    /// Full proxies of each frame (scale entries are kept equal to `p_scale`).
+    pub poses: Vec<Vec<f64>>,
+    /// Current offset of every marker (unit-scale body frame, m).
+    pub offsets: Vec<Vector3<f64>>,
+}
+
+/// What one joint solve did.
+#[derive(Clone, Copy, Debug)]
+pub struct JointOutcome {
+    pub iterations: u32,
+    pub energy: f64,
+    /// Mean over frames of the marker RMSE (m).
+    pub rmse_m: f64,
+}
+
+/// Per-frame blocks of the Schur complement.
+struct FrameBlocks {
+    ainv_b: DMatrix<f64>,
+    ainv_g: DVector<f64>,
+}
+
+impl JointProblem<'_> {
+    fn scale_indices(&self) -> (Vec<usize>, Vec<usize>) {
+        let np = self.proxy.np();
+        let scale = (0..np).filter(|&k| self.proxy.proxies[k].kind == ProxyKind::Scale).collect();
+        let pose = (0..np).filter(|&k| self.proxy.proxies[k].kind != ProxyKind::Scale).collect();
+        (scale, pose)
+    }
+
+    fn model_with(&self, offsets: &[Vector3<f64>]) -> Model {
+        let mut m = self.model.clone();
+        for (mk, o) in m.markers.iter_mut().zip(offsets) {
+            mk.offset = *o;
+        }
+        m
+    }
+
+    /// Offset columns in `z` of the registered markers observed in some frame.
+    fn offset_columns(&self, ns: usize) -> Vec<Option<usize>> {
+        let mut next = ns;
+        (0..self.model.markers.len())
+            .map(|m| {
+                let seen = self
+                    .frames
+                    .iter()
+                    .zip(self.weights)
+                    .any(|(f, w)| w[m] > 0.0 && f[3 * m..3 * m + 3].iter().all(|v| !v.is_nan()));
+                (self.registered[m] && seen).then(|| {
+                    next += 3;
+                    next - 3
+                })
+            })
+            .collect()
+    }
+
+    /// Total objective and mean RMSE at `state`.
+    fn total(&self, state: &JointState, scale: &[usize], cols: &[Option<usize>]) -> (f64, f64) {
+        let model = self.model_with(&state.offsets);
+        let eval = Evaluator::new(&model, self.proxy);
+        let mut ws = EvalWorkspace::new(&model, self.proxy);
+        let (mut e, mut rmse, mut counted) = (0.0, 0.0, 0);
+        for ((obs, p), w) in self.frames.iter().zip(&state.poses).zip(self.weights) {
+            let fp = FrameProblem {
+                observed: obs,
+                marker_weights: w,
+                tracking_ref: self.tracking_ref,
+                tracking_weights: self.tracking_weights,
+            };
+            let (ek, sq, used) = eval.energy(p, &fp, &mut ws);
+            e += ek;
+            if used > 0 {
+                rmse += (sq / used as f64).sqrt();
+                counted += 1;
+            }
+        }
+        let g = Globals { p: &state.poses[0], scale, offsets: &state.offsets, offset_col: cols };
+        e += self.terms.iter().map(|t| t.add(&g, None)).sum::<f64>();
+        (e, if counted > 0 { rmse / counted as f64 } else { f64::NAN })
+    }
+
+    /// Levenberg–Marquardt on all unknowns, the poses eliminated by their Schur complement.
+    pub fn solve(&self, state: &mut JointState) -> JointOutcome {
+        let s = self.settings;
+        let (scale, pose) = self.scale_indices();
+        let (ns, nq) = (scale.len(), pose.len());
+        let cols = self.offset_columns(ns);
+        let nz = ns + 3 * cols.iter().filter(|c| c.is_some()).count();
+        let nm = self.model.markers.len();
+        let (lo, hi): (Vec<f64>, Vec<f64>) = self.proxy.proxies.iter().map(|p| p.range).unzip();
+        let (mut energy, mut rmse) = self.total(state, &scale, &cols);
+        let mut lambda = 1e-4;
+        let mut iterations = 0;
+        let zero_w = vec![0.0; nm];
+        while iterations < s.calibration_max_iterations && !self.frames.is_empty() {
+            iterations += 1;
+            let model = self.model_with(&state.offsets);
+            let eval = Evaluator::new(&model, self.proxy);
+            let mut ws = EvalWorkspace::new(&model, self.proxy);
+            let mut schur = DMatrix::<f64>::zeros(nz, nz);
+            let mut rhs = DVector::<f64>::zeros(nz);
+            {
+                let g = Globals { p: &state.poses[0], scale: &scale, offsets: &state.offsets, offset_col: &cols };
+                let mut gz = DVector::zeros(nz);
+                for t in self.terms {
+                    t.add(&g, Some((&mut schur, &mut gz)));
+                }
+                rhs -= gz;
+            }
+            let mut blocks: Vec<Option<FrameBlocks>> = Vec::with_capacity(self.frames.len());
+            for ((obs, p), mw) in self.frames.iter().zip(&state.poses).zip(self.weights) {
+                // Coordinate targets alone (marker weights 0) give the tracking part of H and g.
+                let tp = FrameProblem {
+                    observed: obs,
+                    marker_weights: &zero_w,
+                    tracking_ref: self.tracking_ref,
+                    tracking_weights: self.tracking_weights,
+                };
+                eval.linearize(p, &tp, &mut ws);
+                let mut a = ws.gn.h.select_rows(&pose).select_columns(&pose);
+                let mut gq = ws.gn.g.select_rows(&pose);
+                let fp = FrameProblem { marker_weights: mw, ..tp };
+                eval.energy(p, &fp, &mut ws);
+                cpu::jacobian(&model, &eval.layout, &mut ws.kin);
+                let jm = eval.marker_jacobian(&ws);
+                // Rows of observed, weighted markers, scaled by √w.
+                let rows: Vec<usize> =
+                    (0..nm).filter(|&m| mw[m] > 0.0 && obs[3 * m..3 * m + 3].iter().all(|v| !v.is_nan())).collect();
+                let nr = 3 * rows.len();
+                let mut jq = DMatrix::zeros(nr, nq);
+                let mut js = DMatrix::zeros(nr, ns);
+                let mut r = DVector::zeros(nr);
+                for (i, &m) in rows.iter().enumerate() {
+                    let sw = mw[m].sqrt();
+                    for a in 0..3 {
+                        let row = 3 * m + a;
+                        r[3 * i + a] = sw * (ws.kin.markers[row] - obs[row]);
+                        for (c, &k) in pose.iter().enumerate() {
+                            jq[(3 * i + a, c)] = sw * jm[(row, k)];
+                        }
+                        for (c, &k) in scale.iter().enumerate() {
+                            js[(3 * i + a, c)] = sw * jm[(row, k)];
+                        }
+                    }
+                }
+                a += jq.tr_mul(&jq);
+                gq += jq.tr_mul(&r);
+                // Scale part.
+                let c_ss = js.tr_mul(&js);
+                let g_s = js.tr_mul(&r);
+                let mut b = DMatrix::zeros(nq, nz);
+                b.columns_mut(0, ns).copy_from(&jq.tr_mul(&js));
+                schur.view_mut((0, 0), (ns, ns)).add_assign(&c_ss);
+                rhs.rows_mut(0, ns).sub_assign(&g_s);
+                // Offset parts: marker m's rows depend on its own offset through R_b diag(s_b).
+                for (i, &m) in rows.iter().enumerate() {
+                    let Some(c) = cols[m] else { continue };
+                    let bdy = model.markers[m].body;
+                    let sb = Vector3::new(
+                        ws.y[model.scale_index(bdy, 0)],
+                        ws.y[model.scale_index(bdy, 1)],
+                        ws.y[model.scale_index(bdy, 2)],
+                    );
+                    let sw = mw[m].sqrt();
+                    let jo = ws.kin.body_rot[bdy] * nalgebra::Matrix3::from_diagonal(&sb) * sw;
+                    let jq_m = jq.rows(3 * i, 3);
+                    let js_m = js.rows(3 * i, 3);
+                    let r_m = r.rows(3 * i, 3);
+                    b.view_mut((0, c), (nq, 3)).copy_from(&(jq_m.transpose() * jo));
+                    let c_so = js_m.transpose() * jo;
+                    schur.view_mut((0, c), (ns, 3)).add_assign(&c_so);
+                    schur.view_mut((c, 0), (3, ns)).add_assign(&c_so.transpose());
+                    schur.view_mut((c, c), (3, 3)).add_assign(&(jo.transpose() * jo));
+                    rhs.rows_mut(c, 3).sub_assign(&(jo.transpose() * r_m));
+                }
+                for d in 0..nq {
+                    a[(d, d)] += lambda * a[(d, d)].max(s.damping_floor);
+                }
+                let Some(chol) = a.cholesky() else {
+                    blocks.push(None);
+                    continue;
+                };
+                let ainv_b = chol.solve(&b);
+                let ainv_g = chol.solve(&gq);
+                schur -= b.tr_mul(&ainv_b);
+                rhs += b.tr_mul(&ainv_g);
+                blocks.push(Some(FrameBlocks { ainv_b, ainv_g }));
+            }
+            for d in 0..nz {
+                schur[(d, d)] += lambda * schur[(d, d)].max(s.damping_floor);
+            }
+            // Bounds: scale ranges, offsets within the bound around their reference.
+            let p_now = &state.poses[0];
+            let mut lb = DVector::zeros(nz);
+            let mut ub = DVector::zeros(nz);
+            for (i, &k) in scale.iter().enumerate() {
+                lb[i] = lo[k] - p_now[k];
+                ub[i] = hi[k] - p_now[k];
+            }
+            for (m, c) in cols.iter().enumerate() {
+                let Some(c) = *c else { continue };
+                for a in 0..3 {
+                    let d = state.offsets[m][a] - self.reference[m][a];
+                    lb[c + a] = -self.bound_m - d;
+                    ub[c + a] = self.bound_m - d;
+                }
+            }
+            let neg_rhs = -&rhs;
+            let problem = QpProblem { h: &schur, g: &neg_rhs, lb: &lb, ub: &ub };
+            let mut dz = DVector::zeros(nz);
+            let solved = match scale_constraints(self.proxy, &scale, p_now) {
+                Some(mut c) => {
+                    // Pad the constraint rows with zero columns for the offsets.
+                    let mut a = DMatrix::zeros(c.a.nrows(), nz);
+                    a.columns_mut(0, ns).copy_from(&c.a);
+                    c.a = a;
+                    let mut qp = ClarabelQp::new(Default::default());
+                    qp.set_constraints(Some(c));
+                    qp.solve(&problem, &mut dz)
+                }
+                None => BoxQp::new().solve(&problem, &mut dz),
+            };
+            if solved.is_err() {
+                break;
+            }
+            let mut next = state.clone();
+            for (m, c) in cols.iter().enumerate() {
+                if let Some(c) = *c {
+                    for a in 0..3 {
+                        let v = next.offsets[m][a] + dz[c + a];
+                        let r = self.reference[m][a];
+                        next.offsets[m][a] = v.clamp(r - self.bound_m, r + self.bound_m);
+                    }
+                }
+            }
+            let ds = dz.rows(0, ns).into_owned();
+            for (p, block) in next.poses.iter_mut().zip(&blocks) {
+                for (i, &k) in scale.iter().enumerate() {
+                    p[k] = (p[k] + ds[i]).clamp(lo[k], hi[k]);
+                }
+                let Some(fb) = block else { continue };
+                let dq = -(&fb.ainv_g + &fb.ainv_b * &dz);
+                for (i, &k) in pose.iter().enumerate() {
+                    p[k] = (p[k] + dq[i]).clamp(lo[k], hi[k]);
+                }
+            }
+            let (e1, r1) = self.total(&next, &scale, &cols);
+            if e1 < energy {
+                let rel = (energy - e1) / energy.max(f64::MIN_POSITIVE);
+                *state = next;
+                energy = e1;
+                rmse = r1;
+                lambda = (lambda / 3.0).max(1e-9);
+                // Converged: the objective stopped falling, or the subject stopped moving (scale
+                // factors and offsets changed by less than 1e-5, i.e. 10 µm on a metre).
+                if rel < s.calibration_rel_tol || dz.amax() < 1e-5 {
+                    break;
+                }
+            } else {
+                lambda *= 4.0;
+                if lambda > 1e8 {
+                    break;
+                }
+            }
+        }
+        JointOutcome { iterations, energy, rmse_m: rmse }
+    }
+}
+
+use std::ops::{AddAssign, SubAssign};
+
+/// Calibrates the scale proxies (offsets fixed) on `frames` (observed marker arrays,
+/// `3·marker + axis`, NaN gaps). `frame_template` supplies weights and tracking arrays (its
+/// `observed` is ignored). `starts` gives each frame's initial proxies (see [`track`]); their
+/// scale entries are replaced by `p0`'s. `terms` are the subject-level priors.
 pub fn calibrate(
     solver: &mut FrameSolver<'_>,
     frames: &[&[f64]],
     frame_template: &FrameProblem<'_>,
     p0: &[f64],
     starts: &[Vec<f64>],
+    terms: &[&dyn GlobalTerm],
 ) -> Calibration {
     let eval = solver.eval;
     let proxy = eval.proxy;
-    let np = proxy.np();
-    let scale: Vec<usize> = (0..np).filter(|&k| proxy.proxies[k].kind == ProxyKind::Scale).collect();
-    let pose: Vec<usize> = (0..np).filter(|&k| proxy.proxies[k].kind != ProxyKind::Scale).collect();
-    let (ns, nq) = (scale.len(), pose.len());
-    let s = solver.settings.clone();
-    let prior = s.calibration_scale_prior;
+    let model = eval.model;
+    let started = std::time::Instant::now();
+    let mut state = initial_state(solver, frames, frame_template, p0, starts);
+    let offsets: Vec<Vector3<f64>> = model.markers.iter().map(|m| m.offset).collect();
+    let registered = vec![false; model.markers.len()];
+    let weights = vec![frame_template.marker_weights; frames.len()];
+    let problem = JointProblem {
+        model,
+        proxy,
+        settings: &solver.settings,
+        frames,
+        weights: &weights,
+        tracking_ref: frame_template.tracking_ref,
+        tracking_weights: frame_template.tracking_weights,
+        registered: &registered,
+        reference: &offsets,
+        bound_m: 0.0,
+        terms,
+    };
+    let out = problem.solve(&mut state);
+    finish(state, out, p0, proxy, None, 0, started)
+}
 
-    // Per-frame poses at the starting scale.
-    let mut poses: Vec<Vec<f64>> = Vec::with_capacity(frames.len());
-    for (obs, start) in frames.iter().zip(starts) {
-        let fp = FrameProblem { observed: obs, ..*frame_template };
+/// Each frame's pose fitted at the scales of `p0` from its start (pose proxies only).
+pub fn initial_state(
+    solver: &mut FrameSolver<'_>,
+    frames: &[&[f64]],
+    frame_template: &FrameProblem<'_>,
+    p0: &[f64],
+    starts: &[Vec<f64>],
+) -> JointState {
+    let weights = vec![frame_template.marker_weights; frames.len()];
+    initial_state_weighted(solver, frames, &weights, frame_template, p0, starts)
+}
+
+/// [`initial_state`] with each frame's own marker weights.
+pub fn initial_state_weighted(
+    solver: &mut FrameSolver<'_>,
+    frames: &[&[f64]],
+    weights: &[&[f64]],
+    frame_template: &FrameProblem<'_>,
+    p0: &[f64],
+    starts: &[Vec<f64>],
+) -> JointState {
+    let proxy = solver.eval.proxy;
+    let np = proxy.np();
+    let mut poses = Vec::with_capacity(frames.len());
+    for ((obs, start), w) in frames.iter().zip(starts).zip(weights) {
+        let fp = FrameProblem { observed: obs, marker_weights: w, ..*frame_template };
         let mut p = start.clone();
-        for &k in &scale {
-            p[k] = p0[k];
+        for k in 0..np {
+            if proxy.proxies[k].kind == ProxyKind::Scale {
+                p[k] = p0[k];
+            }
         }
         let saved =
             std::mem::replace(&mut solver.free, (0..np).map(|k| proxy.proxies[k].kind != ProxyKind::Scale).collect());
@@ -75,136 +455,31 @@ pub fn calibrate(
         solver.free = saved;
         poses.push(p);
     }
-    let mut shared: Vec<f64> = scale.iter().map(|&k| p0[k]).collect();
-    let total = |solver: &mut FrameSolver<'_>, poses: &[Vec<f64>], shared: &[f64]| -> (f64, f64) {
-        let mut e = 0.0;
-        let mut rmse = 0.0;
-        let mut counted = 0;
-        for (obs, p) in frames.iter().zip(poses) {
-            let mut p = p.clone();
-            for (i, &k) in scale.iter().enumerate() {
-                p[k] = shared[i];
-            }
-            let fp = FrameProblem { observed: obs, ..*frame_template };
-            let (ek, sq, used) = eval.energy(&p, &fp, &mut solver.ws);
-            e += ek;
-            if used > 0 {
-                rmse += (sq / used as f64).sqrt();
-                counted += 1;
-            }
-        }
-        e += 0.5 * prior * shared.iter().map(|v| (v - 1.0).powi(2)).sum::<f64>();
-        (e, if counted > 0 { rmse / counted as f64 } else { f64::NAN })
-    };
-    let (mut energy, mut rmse) = total(solver, &poses, &shared);
-    let mut lambda = 1e-4;
-    let mut iterations = 0;
-    let (lo, hi): (Vec<f64>, Vec<f64>) = proxy.proxies.iter().map(|p| p.range).unzip();
-    while iterations < s.calibration_max_iterations && !frames.is_empty() {
-        iterations += 1;
-        // Assemble the Schur complement.
-        let mut schur = DMatrix::<f64>::zeros(ns, ns);
-        let mut rhs = DVector::<f64>::zeros(ns);
-        let mut blocks = Vec::with_capacity(frames.len());
-        for i in 0..ns {
-            schur[(i, i)] += prior;
-            rhs[i] -= prior * (shared[i] - 1.0);
-        }
-        for (obs, p) in frames.iter().zip(&poses) {
-            let mut p = p.clone();
-            for (i, &k) in scale.iter().enumerate() {
-                p[k] = shared[i];
-            }
-            let fp = FrameProblem { observed: obs, ..*frame_template };
-            eval.linearize(&p, &fp, &mut solver.ws);
-            let gn = &solver.ws.gn;
-            let mut a = gn.h.select_rows(&pose).select_columns(&pose);
-            for d in 0..nq {
-                a[(d, d)] += lambda * a[(d, d)].max(s.damping_floor);
-            }
-            let b = gn.h.select_rows(&pose).select_columns(&scale);
-            let c = gn.h.select_rows(&scale).select_columns(&scale);
-            let gq = gn.g.select_rows(&pose);
-            let gs = gn.g.select_rows(&scale);
-            // A frame whose pose block cannot be factored keeps its pose this iteration and
-            // contributes its scale block alone.
-            let Some(chol) = a.cholesky() else {
-                schur += c;
-                rhs -= gs;
-                blocks.push(None);
-                continue;
-            };
-            let ainv_b = chol.solve(&b);
-            let ainv_g = chol.solve(&gq);
-            schur += c - b.transpose() * &ainv_b;
-            rhs -= gs - b.transpose() * &ainv_g;
-            blocks.push(Some((ainv_b, ainv_g)));
-        }
-        for d in 0..ns {
-            schur[(d, d)] += lambda * schur[(d, d)].max(s.damping_floor);
-        }
-        // The poses eliminated, the scale step is a small QP: the scale ranges as bounds, the
-        // profile's constraints on scale proxies as general constraints.
-        let lb = DVector::from_iterator(ns, scale.iter().enumerate().map(|(i, &k)| lo[k] - shared[i]));
-        let ub = DVector::from_iterator(ns, scale.iter().enumerate().map(|(i, &k)| hi[k] - shared[i]));
-        let neg_rhs = -&rhs;
-        let problem = QpProblem { h: &schur, g: &neg_rhs, lb: &lb, ub: &ub };
-        let mut ds = DVector::zeros(ns);
-        let mut current = p0.to_vec();
-        for (i, &k) in scale.iter().enumerate() {
-            current[k] = shared[i];
-        }
-        let solved = match scale_constraints(proxy, &scale, &current) {
-            Some(c) => {
-                let mut qp = ClarabelQp::new(Default::default());
-                qp.set_constraints(Some(c));
-                qp.solve(&problem, &mut ds)
-            }
-            None => BoxQp::new().solve(&problem, &mut ds),
-        };
-        if solved.is_err() {
-            break;
-        }
-        let mut new_shared = shared.clone();
-        for (i, &k) in scale.iter().enumerate() {
-            new_shared[i] = (shared[i] + ds[i]).clamp(lo[k], hi[k]);
-        }
-        let mut new_poses = poses.clone();
-        for (p, block) in new_poses.iter_mut().zip(&blocks) {
-            let Some((ainv_b, ainv_g)) = block else { continue };
-            let dq = -(ainv_g + ainv_b * &ds);
-            for (i, &k) in pose.iter().enumerate() {
-                p[k] = (p[k] + dq[i]).clamp(lo[k], hi[k]);
-            }
-        }
-        let (e1, r1) = total(solver, &new_poses, &new_shared);
-        if e1 < energy {
-            let rel = (energy - e1) / energy.max(f64::MIN_POSITIVE);
-            poses = new_poses;
-            shared = new_shared;
-            energy = e1;
-            rmse = r1;
-            lambda = (lambda / 3.0).max(1e-9);
-            if rel < 1e-9 {
-                break;
-            }
-        } else {
-            lambda *= 4.0;
-            if lambda > 1e8 {
-                break;
-            }
-        }
+    JointState { poses, offsets: solver.eval.model.markers.iter().map(|m| m.offset).collect() }
+}
+
+/// The calibration result of a solved joint state.
+pub fn finish(
+    state: JointState,
+    out: JointOutcome,
+    p0: &[f64],
+    _proxy: &ProxyMap,
+    offsets: Option<Vec<Vector3<f64>>>,
+    registered: usize,
+    started: std::time::Instant,
+) -> Calibration {
+    let proxies = state.poses.last().cloned().unwrap_or_else(|| p0.to_vec());
+    Calibration {
+        proxies,
+        frames: state.poses.len(),
+        iterations: out.iterations,
+        rmse_m: out.rmse_m,
+        registered,
+        seconds: started.elapsed().as_secs_f64(),
+        prior: Default::default(),
+        frame_proxies: state.poses,
+        marker_offsets: offsets,
     }
-    for p in &mut poses {
-        for (i, &k) in scale.iter().enumerate() {
-            p[k] = shared[i];
-        }
-    }
-    let mut proxies = poses.last().cloned().unwrap_or_else(|| p0.to_vec());
-    for (i, &k) in scale.iter().enumerate() {
-        proxies[k] = shared[i];
-    }
-    Calibration { proxies, frames: frames.len(), iterations, rmse_m: rmse, frame_proxies: poses, marker_offsets: None }
 }
 
 /// The profile's constraints that involve scale proxies only, as constraints on a step of the
@@ -246,11 +521,15 @@ pub fn track(
     let mut warm = false;
     for obs in frames {
         let fp = FrameProblem { observed: obs, ..*frame_template };
-        if !warm {
+        let st = if warm {
+            solver.solve(&fp, &mut p)
+        } else {
+            // Several starts for a frame without a previous solution (neutral pose with root
+            // placement and sweeps, root placement alone): a crossed or flipped first frame
+            // would carry its basin through the whole track.
             p = p0.to_vec();
-            cold_start(solver, &fp, &mut p);
-        }
-        let st = solver.solve(&fp, &mut p);
+            multi_start(solver, &fp, &mut p, p0)
+        };
         warm = st.status != super::FrameStatus::TooFewMarkers;
         out.push(p.clone());
     }

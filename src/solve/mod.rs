@@ -6,6 +6,7 @@ pub mod calibrate;
 pub mod init;
 pub mod placement;
 pub mod presolve;
+pub mod prior;
 pub mod qp;
 pub mod settings;
 pub mod trqp;

@@ -89,8 +89,11 @@ pub struct SolverSettings {
     pub calibration_frames: usize,
     /// Weight of the prior pulling scale factors toward 1 during calibration. Default 1e-6.
     pub calibration_scale_prior: f64,
-    /// Iteration cap of the multi-frame calibration. Default 50.
+    /// Iteration cap of the multi-frame calibration (per stage). Default 50.
     pub calibration_max_iterations: u32,
+    /// Calibration stops when an accepted step lowers its objective by less than this fraction.
+    /// Default 1e-6 (the scales then move by far less than their uncertainty).
+    pub calibration_rel_tol: f64,
     /// Marker placement after calibration (OpenSim's MarkerPlacer): every marker not flagged
     /// `fixed` moves to where the calibration frames observed it on its body. When some markers
     /// are flagged fixed, only those inform the scales (the others are untrusted until placed).
@@ -105,6 +108,46 @@ pub struct SolverSettings {
     /// Root-to-leaf sweeps per pre-solve. Default 2 (the second corrects parents for their
     /// children's new poses, as the overlapping subproblems share markers).
     pub presolve_sweeps: u32,
+    /// Frames used by calibration from motion trials when there is no static trial, spread over
+    /// all of the subject's trials (`calibration_frames` applies to a static trial). Default 96
+    /// (48 gives 0.7 mm more RMSE on the OpenCap subject; calibration time grows linearly).
+    pub calibration_frames_motion: usize,
+    /// Marker registration: calibration estimates every marker's body-frame offset together with
+    /// the scales and the calibration poses, offsets held near the model's (anatomical markers
+    /// strongly, tracking markers weakly). Default true; off with `--no-register`, and an
+    /// OpenSim Scale setup's `MarkerPlacer` decides instead when one is given.
+    pub registration: bool,
+    /// Standard deviation of an anatomical marker's offset about the model's (m). Default 0.003:
+    /// stiff enough that a body's scale is not traded for moving all its landmarks together
+    /// (with 0.005–0.01 the synthetic audit's scale error grows from 3.7 to 5–11 mm).
+    pub registration_anatomical_sd_m: f64,
+    /// Standard deviation of a tracking marker's offset about the model's (m). Default 0.1.
+    pub registration_tracking_sd_m: f64,
+    /// Largest move of a marker's offset from the model's, per axis (m). Default 0.2.
+    pub registration_bound_m: f64,
+    /// Marker noise `σ_n` (m) that puts the priors in the marker objective's units: one standard
+    /// deviation of a prior costs what one marker missed by `σ_n` in one frame costs. Default
+    /// 0.01. The offset priors of registration use it as it is; the scale priors use it for the
+    /// first stage, then the marker RMSE that stage reaches (within 2–30 mm: empirical Bayes).
+    pub prior_noise_sd_m: f64,
+    /// How many frames of evidence one standard deviation of a subject-level prior on the
+    /// scales (anthropometric, stature ratio, anisotropy) is worth: its energy is this times
+    /// what one marker missed by `prior_noise_sd_m` in one frame costs. Default 10: the frames of
+    /// a motion are far from independent observations (skin motion and model error repeat from
+    /// frame to frame), so a weight of 1 would let ~50 calibration frames outvote the survey
+    /// fifty-fold. On the OpenCap/AddBiomechanics subject (docs/CALIBRATION.md), 1 gives a 1.81 m
+    /// stature (true: 1.84 m) and an upper arm 3.3 σ long; 10 gives 1.84 m, every scale within
+    /// 2.4 σ, for +0.3 mm RMSE.
+    pub prior_frames: f64,
+    /// Weight of the anthropometric prior (ANSUR II dimensions conditioned on the subject's
+    /// sex, height and mass), relative to `prior_frames`; 0 disables it. Default 1.
+    pub anthropometric_weight: f64,
+    /// Standard deviation (dimensionless) of a scale factor of a body no survey dimension
+    /// measures, about the subject's stature ratio to the generic model. Default 0.1.
+    pub scale_prior_sd: f64,
+    /// Standard deviation of the difference between two axes' factors of one body (`xyz`
+    /// scale groups; the anisotropy penalty). Default 0.05.
+    pub anisotropy_sd: f64,
 }
 
 impl Default for SolverSettings {
@@ -131,9 +174,20 @@ impl Default for SolverSettings {
             calibration_frames: 20,
             calibration_scale_prior: 1e-6,
             calibration_max_iterations: 50,
+            calibration_rel_tol: 1e-6,
             marker_placement: false,
             presolve: Presolve::default(),
             presolve_sweeps: 2,
+            calibration_frames_motion: 96,
+            registration: true,
+            registration_anatomical_sd_m: 0.003,
+            registration_tracking_sd_m: 0.1,
+            registration_bound_m: 0.2,
+            prior_noise_sd_m: 0.01,
+            prior_frames: 10.0,
+            anthropometric_weight: 1.0,
+            scale_prior_sd: 0.1,
+            anisotropy_sd: 0.05,
         }
     }
 }

@@ -112,6 +112,7 @@ pub fn random_model(seed: u64, nb: usize) -> Model {
                 offset: Vector3::new(r.random_range(-0.2..0.2), r.random_range(-0.2..0.2), r.random_range(-0.2..0.2)),
                 weight: r.random_range(0.5..2.0),
                 fixed: false,
+                class: None,
             });
         }
     }

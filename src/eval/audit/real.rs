@@ -6,7 +6,7 @@ use super::stagewise;
 use crate::archive::config::Dataset;
 use crate::archive::discover::discover;
 use crate::pipeline::stats::MeanP50P90;
-use crate::pipeline::subject::{calibrate_placed, prepare_subject, read_trial};
+use crate::pipeline::subject::{calibrate_placed, calibrate_placed_with, prepare_subject, read_trial};
 use crate::pipeline::{solve_trial, TrialResult};
 use crate::solve::FrameStatus;
 use serde::{Deserialize, Serialize};
@@ -109,7 +109,15 @@ fn audit_dataset(
         let input = d.input_options();
         let (st, _) = read_trial(&sub.ctx, static_path, &input)?;
         let statics = [("static", &st)];
-        let (cal_j, placed_j) = calibrate_placed(&sub.ctx, &statics)?;
+        // The joint method calibrates as `solve` does: the static trial and the motion trials
+        // together; the stage-wise baseline scales from the static trial alone (OpenSim's way).
+        let trials: Vec<(String, crate::io::MarkerTrial)> = g
+            .trials
+            .iter()
+            .map(|t| read_trial(&sub.ctx, &t.path, &input).map(|(m, _)| (t.rel.clone(), m)))
+            .collect::<Result<_, _>>()?;
+        let motions: Vec<(&str, &crate::io::MarkerTrial)> = trials.iter().map(|(n, m)| (n.as_str(), m)).collect();
+        let (cal_j, placed_j) = calibrate_placed_with(&sub.ctx, &statics, &motions)?;
         let ctx_j = placed_j.unwrap_or_else(|| sub.ctx.clone());
         let scale = stagewise::measure(&sub.ctx, &st, &setup.measurements, &setup.manual_scales);
         let pinned = stagewise::pinned(&sub.ctx, &scale);
@@ -126,10 +134,9 @@ fn audit_dataset(
                 .map(|(k, p)| (p.name.clone(), cal[k]))
                 .collect()
         };
-        for t in &g.trials {
-            let (m, _) = read_trial(&sub.ctx, &t.path, &input)?;
-            let rj = solve_trial(&ctx_j, &t.rel, &m, &cal_j, 1)?;
-            let rs = solve_trial(&ctx_s, &t.rel, &m, &cal_s, 1)?;
+        for (t, (_, m)) in g.trials.iter().zip(&trials) {
+            let rj = solve_trial(&ctx_j, &t.rel, m, &cal_j, 1)?;
+            let rs = solve_trial(&ctx_s, &t.rel, m, &cal_s, 1)?;
             let stem = Path::new(&t.rel).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
             out.push(RealAudit {
                 dataset: d.name.clone(),

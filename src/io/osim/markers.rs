@@ -35,7 +35,14 @@ pub fn parse_marker_set(text: &str, file_name: &str, model: &Model) -> Result<Ve
         if markers.iter().any(|m: &Marker| m.name == name) {
             return Err(ctx.err(mk, format!("duplicate marker name '{name}'")));
         }
-        markers.push(Marker { name: name.to_string(), body, offset, weight: 1.0, fixed });
+        markers.push(Marker {
+            name: name.to_string(),
+            body,
+            offset,
+            weight: 1.0,
+            fixed: fixed.unwrap_or(false),
+            class: class_of(fixed),
+        });
     }
     Ok(markers)
 }
@@ -44,7 +51,7 @@ pub fn parse_marker_set(text: &str, file_name: &str, model: &Model) -> Result<Ve
 pub(super) fn marker_fields<'a>(
     ctx: &Ctx<'a>,
     mk: Node<'a, 'a>,
-) -> Result<(&'a str, &'a str, Vector3<f64>, bool), OsimError> {
+) -> Result<(&'a str, &'a str, Vector3<f64>, Option<bool>), OsimError> {
     let Some(name) = mk.attribute("name") else {
         return Err(ctx.err(mk, "marker without a name"));
     };
@@ -53,6 +60,11 @@ pub(super) fn marker_fields<'a>(
         return Err(ctx.err(mk, format!("marker '{name}' names no body (socket_parent_frame or body)")));
     };
     let offset = ctx.vec3(mk, "location")?.unwrap_or_default();
-    let fixed = ctx.boolean(mk, "fixed")?.unwrap_or(false);
+    let fixed = ctx.boolean(mk, "fixed")?;
     Ok((name, body, offset, fixed))
+}
+
+/// The registration class an OpenSim `<fixed>` flag gives (none when absent).
+pub(super) fn class_of(fixed: Option<bool>) -> Option<crate::model::MarkerClass> {
+    fixed.map(|f| if f { crate::model::MarkerClass::Anatomical } else { crate::model::MarkerClass::Tracking })
 }

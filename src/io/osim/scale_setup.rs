@@ -33,8 +33,11 @@ pub struct ScaleSetup {
     pub marker_set_file: Option<PathBuf>,
     /// `MarkerPlacer` `marker_file` (the static trial), resolved against the setup's folder.
     pub static_file: Option<PathBuf>,
-    /// Subject mass (kg), when given.
+    /// Subject mass (kg), when given (OpenSim's `-1` means not given).
     pub mass_kg: Option<f64>,
+    /// Subject height (m), when given: OpenSim writes it in millimetres (`1803.4`); a value
+    /// under 10 is taken as metres, `-1` as not given.
+    pub height_m: Option<f64>,
     /// The applied measurements, in the `ModelScaler`'s order (empty when it does not apply).
     pub measurements: Vec<Measurement>,
     /// The applied manual scale factors `(body, [sx, sy, sz])`, in the `ModelScaler`'s order.
@@ -69,7 +72,9 @@ pub fn parse_scale_setup(text: &str, file_name: &str, base: &Path) -> Result<Sca
         return Err(ctx.err(root, "missing <ScaleTool>: not an OpenSim Scale tool setup"));
     };
     let resolve = |t: &str| (!t.is_empty() && t != "Unassigned").then(|| base.join(t));
-    let mut out = ScaleSetup { mass_kg: ctx.scalar(tool, "mass")?, ..Default::default() };
+    let height = ctx.scalar(tool, "height")?.filter(|h| *h > 0.0).map(|h| if h > 10.0 { h / 1000.0 } else { h });
+    let mass = ctx.scalar(tool, "mass")?.filter(|m| *m > 0.0);
+    let mut out = ScaleSetup { mass_kg: mass, height_m: height, ..Default::default() };
     if let Some(maker) = child(tool, "GenericModelMaker") {
         out.marker_set_file = ctx.text(maker, "marker_set_file").and_then(|(_, t)| resolve(t));
     }

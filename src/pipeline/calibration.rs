@@ -1,0 +1,472 @@
+//! Calibrating a subject from its files' frames: choosing the frames, the priors, and the
+//! stages of the joint solve ([`crate::solve::calibrate`]).
+//!
+//! With marker registration (the default for a generic model):
+//! 1. poses are tracked through each trial with the anatomical markers (multi-start for the
+//!    first frame), and frames spread over all trials are chosen;
+//! 2. scales and poses are solved jointly on the anatomical markers, offsets held;
+//! 3. tracking markers' offsets start where those poses saw them (clamped to their bound);
+//! 4. scales, poses and every marker's offset are solved jointly on all markers, the offsets
+//!    regularised toward the model's (anatomical strongly, tracking weakly).
+//!
+//! Without registration, step 2 runs on all markers; an OpenSim `MarkerPlacer` (or
+//! `--place-markers`) then moves the unfixed markers as OpenSim does.
+
+use super::trial::{match_markers, no_match, observations, TrialError};
+use super::Context;
+use crate::io::MarkerTrial;
+use crate::kinematics::assembly::FrameProblem;
+use crate::model::anthropometry::{resolve, stature_ratio, Survey};
+use crate::model::proxy::ProxyKind;
+use crate::model::MarkerClass;
+use crate::solve::calibrate::{finish, initial_state_weighted, track, JointProblem};
+use crate::solve::placement::place_markers;
+use crate::solve::prior::{
+    measure, Anisotropy, Anthropometric, GlobalTerm, OffsetPrior, PriorReport, ScaleReport, ScaleToward,
+};
+use crate::solve::{make_qp, Calibration, FrameSolver};
+use nalgebra::{DVector, Vector3};
+
+/// Markers observed in a frame that the solver uses (weight > 0).
+fn observed_count(obs: &[f64], weights: &[f64]) -> usize {
+    obs.chunks_exact(3).zip(weights).filter(|(c, &w)| w > 0.0 && c.iter().all(|v| !v.is_nan())).count()
+}
+
+/// Up to `k` frames spread evenly over those with the most observed markers.
+fn calibration_frames(obs: &[f64], weights: &[f64], stride: usize, k: usize, min: usize) -> Vec<usize> {
+    let counts: Vec<usize> = obs.chunks(stride).map(|o| observed_count(o, weights)).collect();
+    let best = counts.iter().copied().max().unwrap_or(0);
+    let good: Vec<usize> = (0..counts.len()).filter(|&f| counts[f] >= min && counts[f] + 2 >= best).collect();
+    if good.is_empty() || k == 0 {
+        return good;
+    }
+    let n = good.len().min(k);
+    (0..n).map(|i| good[(i * good.len()) / n + good.len() / (2 * n)]).collect()
+}
+
+/// The subject-level terms of `ctx`'s calibration, and how to report against them.
+struct Priors {
+    terms: Vec<Box<dyn GlobalTerm>>,
+    anthro: Option<Anthropometric>,
+    /// Per scale unknown: prior mean and sd of the stature-ratio prior (used where no dimension
+    /// governs the scale).
+    ratio: f64,
+    landmarks: Option<String>,
+    stature_dim: Option<usize>,
+    stature_ratio: f64,
+}
+
+/// The priors with their weights for marker noise `noise_m` (m).
+fn priors(ctx: &Context, scale: &[usize], noise_m: f64) -> Result<Priors, TrialError> {
+    let s = &ctx.settings;
+    let ns = scale.len();
+    let noise2 = noise_m.powi(2) * s.prior_frames;
+    let mut terms: Vec<Box<dyn GlobalTerm>> = Vec::new();
+    let mut ratio = 1.0;
+    let mut anthro = None;
+    let (mut stature_dim, mut stat_ratio) = (None, 1.0);
+    let landmarks = ctx.landmarks.as_ref().map(|(n, _)| n.clone());
+    let p_neutral = ctx.proxy.default_proxies();
+    if let Some((name, lm)) = ctx.landmarks.as_ref().filter(|_| s.anthropometric_weight > 0.0) {
+        let survey = Survey::ansur2();
+        let dims = resolve(lm, &ctx.model, &survey, name)?;
+        let up = ctx.up.unwrap_or_else(Vector3::z);
+        let rows: Vec<Vec<(usize, f64)>> = dims.iter().map(|d| d.survey.clone()).collect();
+        // κ: survey value per model value at the generic subject the model represents.
+        let (generic_mean, _) = survey.conditioned(&rows, &lm.generic);
+        let at_one = measure(&ctx.model, &ctx.proxy, &dims, &up, &p_neutral);
+        let kappa: Vec<f64> = generic_mean.iter().zip(&at_one).map(|(g, d)| g / d).collect();
+        let (mean, mut cov) = survey.conditioned(&rows, &ctx.subject);
+        // Model-to-survey mismatch of the landmarks: 10 mm on every dimension (also keeps the
+        // covariance regular when a dimension is the known stature itself).
+        for d in 0..dims.len() {
+            cov[(d, d)] += 0.01f64.powi(2);
+        }
+        let sd: Vec<f64> = (0..dims.len()).map(|d| cov[(d, d)].sqrt()).collect();
+        let cov_inv = cov
+            .clone()
+            .try_inverse()
+            .unwrap_or_else(|| nalgebra::DMatrix::from_diagonal(&cov.map_diagonal(|v| 1.0 / v)));
+        stature_dim = dims.iter().position(|d| d.name == lm.stature_from);
+        if let Some(i) = stature_dim {
+            stat_ratio = stature_ratio(&survey, &dims[i], ctx.subject.sex);
+            // Stature ratio of the subject to the generic model, for the unmeasured scales.
+            let subject_stature = mean[i] * stat_ratio;
+            let generic_stature = lm.generic.height_m.unwrap_or(generic_mean[i] * stat_ratio);
+            ratio = subject_stature / generic_stature;
+        }
+        anthro = Some(Anthropometric {
+            model: ctx.model.clone(),
+            proxy: ctx.proxy.clone(),
+            dims,
+            up,
+            kappa,
+            mean: DVector::from_iterator(mean.len(), mean.iter().copied()),
+            cov_inv,
+            sd,
+            weight: s.anthropometric_weight * noise2,
+        });
+    }
+    // Weak pull toward 1 on every scale, and the stature-ratio prior on scales no dimension
+    // governs.
+    let governed = anthro.as_ref().map(|a| governing(a, &p_neutral, scale)).unwrap_or_else(|| vec![None; ns]);
+    let mut toward = ScaleToward { target: vec![1.0; ns], weight: vec![s.calibration_scale_prior; ns] };
+    for i in 0..ns {
+        if governed[i].is_none() && anthro.is_some() {
+            toward.target[i] = ratio;
+            toward.weight[i] = noise2 / s.scale_prior_sd.powi(2);
+        }
+    }
+    terms.push(Box::new(toward));
+    // Anisotropy: pairs of axes of one body's `xyz` scale group.
+    let mut pairs = Vec::new();
+    let names: Vec<&str> = scale.iter().map(|&k| ctx.proxy.proxies[k].name.as_str()).collect();
+    for (i, n) in names.iter().enumerate() {
+        if let Some(stem) = n.strip_suffix("_x") {
+            for suffix in ["_y", "_z"] {
+                if let Some(j) = names.iter().position(|m| *m == format!("{stem}{suffix}")) {
+                    pairs.push((i, j));
+                }
+            }
+        } else if let Some(stem) = n.strip_suffix("_y") {
+            if let Some(j) = names.iter().position(|m| *m == format!("{stem}_z")) {
+                pairs.push((i, j));
+            }
+        }
+    }
+    if !pairs.is_empty() && s.anisotropy_sd > 0.0 {
+        terms.push(Box::new(Anisotropy { pairs, weight: noise2 / s.anisotropy_sd.powi(2) }));
+    }
+    Ok(Priors { terms, anthro, ratio, landmarks, stature_dim, stature_ratio: stat_ratio })
+}
+
+/// For each scale unknown, the dimension it governs most (largest relative sensitivity
+/// `∂log d/∂log s` above 0.2), if any.
+fn governing(a: &Anthropometric, p: &[f64], scale: &[usize]) -> Vec<Option<usize>> {
+    let base = a.measure(p);
+    let mut q = p.to_vec();
+    scale
+        .iter()
+        .map(|&k| {
+            let v = q[k];
+            q[k] = v * 1.01;
+            let up = a.measure(&q);
+            q[k] = v;
+            let sens: Vec<f64> = up.iter().zip(&base).map(|(u, b)| ((u - b) / b).abs() / 0.01).collect();
+            let (best, s) =
+                sens.iter().copied().enumerate().fold((0, 0.0), |m, (i, s)| if s > m.1 { (i, s) } else { m });
+            (s > 0.2).then_some(best)
+        })
+        .collect()
+}
+
+/// Calibrates one subject's morphology (and, with registration, its markers' offsets) from
+/// frames pooled over `trials`: a static trial when the context says it calibrates on one
+/// (`static_calibration`), else the motion trials themselves.
+pub fn calibrate_subject(ctx: &Context, trials: &[(&str, &MarkerTrial)]) -> Result<Calibration, TrialError> {
+    if ctx.static_calibration {
+        calibrate_subject_with(ctx, trials, &[])
+    } else {
+        calibrate_subject_with(ctx, &[], trials)
+    }
+}
+
+/// Which weights a calibration frame uses.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Static,
+    Motion,
+}
+
+/// Calibrates one subject from its static trials and its motion trials together: one
+/// morphology that fits both (`calibration_frames` from the static trials with their weights,
+/// `calibration_frames_motion` spread over the motion trials with the motion weights). Marker
+/// placement (OpenSim's MarkerPlacer) places on the static frames when there are any.
+pub fn calibrate_subject_with(
+    ctx: &Context,
+    statics: &[(&str, &MarkerTrial)],
+    motions: &[(&str, &MarkerTrial)],
+) -> Result<Calibration, TrialError> {
+    let started = std::time::Instant::now();
+    let settings = &ctx.settings;
+    ctx.subject.validate()?;
+    let nm = ctx.model.markers.len();
+    let stride = 3 * nm;
+    let eval = ctx.evaluator();
+    let placing = settings.marker_placement;
+    let registering = settings.registration && !placing;
+    let classes = ctx.marker_classes();
+    let any_fixed = ctx.model.markers.iter().any(|m| m.fixed);
+    let anatomical = classes.iter().filter(|c| **c == MarkerClass::Anatomical).count();
+    // Weights of the first stage: with placement, markers flagged fixed alone inform the
+    // scales (when the model flags any); with registration, anatomical markers alone (when
+    // there are enough of them).
+    let first = |all: &[f64]| -> Vec<f64> {
+        ctx.model
+            .markers
+            .iter()
+            .zip(all)
+            .zip(&classes)
+            .map(|((m, &w), c)| {
+                if (placing && any_fixed && !m.fixed) || (registering && anatomical >= 6 && *c == MarkerClass::Tracking)
+                {
+                    0.0
+                } else {
+                    w
+                }
+            })
+            .collect()
+    };
+    let all_w = |k: Kind| if k == Kind::Static { &ctx.calibration_weights } else { &ctx.marker_weights };
+    let first_static = first(all_w(Kind::Static));
+    let first_motion = first(all_w(Kind::Motion));
+    let first_w = |k: Kind| if k == Kind::Static { &first_static } else { &first_motion };
+    let (coord_ref, coord_w) = ctx.coordinate_tracking();
+    let mut solver = FrameSolver::new(&eval, settings.clone(), make_qp(settings.qp));
+    let np = ctx.proxy.np();
+    let scale: Vec<usize> = (0..np).filter(|&k| ctx.proxy.proxies[k].kind == ProxyKind::Scale).collect();
+    let pri = priors(ctx, &scale, settings.prior_noise_sd_m)?;
+    let mut p0 = ctx.proxy.default_proxies();
+    for &k in &scale {
+        let (lo, hi) = ctx.proxy.proxies[k].range;
+        p0[k] = pri.ratio.clamp(lo, hi);
+    }
+    let mut pooled: Vec<f64> = Vec::new();
+    let mut starts: Vec<Vec<f64>> = Vec::new();
+    let mut kinds: Vec<Kind> = Vec::new();
+    let inputs = statics.iter().map(|t| (t, Kind::Static)).chain(motions.iter().map(|t| (t, Kind::Motion)));
+    for ((name, t), kind) in inputs {
+        let wanted =
+            if kind == Kind::Static { settings.calibration_frames } else { settings.calibration_frames_motion };
+        let count = if kind == Kind::Static { statics.len() } else { motions.len() };
+        let per_trial = wanted.div_ceil(count.max(1));
+        let map = match_markers(ctx, name, t)?.columns;
+        if map.iter().all(Option::is_none) {
+            return Err(no_match(ctx, name, t));
+        }
+        let w1 = first_w(kind);
+        let o = observations(t, &map);
+        units_check(ctx, name, &o, stride, all_w(kind), &p0)?;
+        let chosen = calibration_frames(&o, w1, stride, per_trial, settings.min_markers);
+        let Some(&last) = chosen.last() else { continue };
+        // Track from the first frame to the last chosen one so that every chosen frame starts
+        // from a pose continuous with the motion (a cold start far into a motion can land in a
+        // wrong local minimum).
+        let begin = (0..=last)
+            .find(|&f| observed_count(&o[f * stride..(f + 1) * stride], w1) >= settings.min_markers)
+            .unwrap_or(0);
+        let slices: Vec<&[f64]> = (begin..=last).map(|f| &o[f * stride..(f + 1) * stride]).collect();
+        let template =
+            FrameProblem { observed: &[], marker_weights: w1, tracking_ref: &coord_ref, tracking_weights: &coord_w };
+        let tracked = track(&mut solver, &slices, &template, &p0);
+        for f in chosen {
+            pooled.extend_from_slice(&o[f * stride..(f + 1) * stride]);
+            starts.push(tracked[f - begin].clone());
+            kinds.push(kind);
+        }
+    }
+    if pooled.is_empty() {
+        let trial = statics.iter().chain(motions).map(|(n, _)| *n).collect::<Vec<_>>().join(", ");
+        return Err(TrialError::NothingToCalibrate { trial, min: settings.min_markers });
+    }
+    let slices: Vec<&[f64]> = pooled.chunks(stride).collect();
+    let w_first: Vec<&[f64]> = kinds.iter().map(|&k| first_w(k).as_slice()).collect();
+    let w_all: Vec<&[f64]> = kinds.iter().map(|&k| all_w(k).as_slice()).collect();
+    let template = FrameProblem {
+        observed: &[],
+        marker_weights: &first_motion,
+        tracking_ref: &coord_ref,
+        tracking_weights: &coord_w,
+    };
+    let generic: Vec<Vector3<f64>> = ctx.model.markers.iter().map(|m| m.offset).collect();
+    let none = vec![false; nm];
+    // Stage 1: scales and poses on the first-stage markers.
+    let mut state = initial_state_weighted(&mut solver, &slices, &w_first, &template, &p0, &starts);
+    let terms: Vec<&dyn GlobalTerm> =
+        pri.terms.iter().map(|t| t.as_ref()).chain(pri.anthro.as_ref().map(|a| a as &dyn GlobalTerm)).collect();
+    let stage1 = JointProblem {
+        model: &ctx.model,
+        proxy: &ctx.proxy,
+        settings,
+        frames: &slices,
+        weights: &w_first,
+        tracking_ref: &coord_ref,
+        tracking_weights: &coord_w,
+        registered: &none,
+        reference: &generic,
+        bound_m: 0.0,
+        terms: &terms,
+    };
+    let mut out = stage1.solve(&mut state);
+    let mut iterations = out.iterations;
+    // Empirical Bayes: the scale priors are weighed against the marker error the data show
+    // (stage 1's RMSE, within [0.5, 30] mm: half a millimetre is about what optical motion
+    // capture resolves) rather than a fixed one: clean data (a static trial, noise of a
+    // millimetre) outweigh the survey, noisy motion data lean on it more.
+    let noise = out.rmse_m.clamp(0.0005, 0.03);
+    let pri = priors(ctx, &scale, if out.rmse_m.is_finite() { noise } else { settings.prior_noise_sd_m })?;
+    let terms: Vec<&dyn GlobalTerm> =
+        pri.terms.iter().map(|t| t.as_ref()).chain(pri.anthro.as_ref().map(|a| a as &dyn GlobalTerm)).collect();
+    let stage1 = JointProblem { terms: &terms, ..stage1 };
+    if !registering {
+        out = stage1.solve(&mut state);
+        iterations += out.iterations;
+    }
+    let mut offsets = None;
+    let mut registered = 0;
+    // Frames that placement and registration initialise offsets from: the static ones if any.
+    let place_on: Vec<usize> = match kinds.iter().any(|k| *k == Kind::Static) {
+        true => (0..kinds.len()).filter(|&i| kinds[i] == Kind::Static).collect(),
+        false => (0..kinds.len()).collect(),
+    };
+    let place_frames: Vec<&[f64]> = place_on.iter().map(|&i| slices[i]).collect();
+    let place_poses: Vec<Vec<f64>> = place_on.iter().map(|&i| state.poses[i].clone()).collect();
+    if registering {
+        // Stage 2: tracking markers start where the stage-1 poses saw them.
+        let tracking: Vec<bool> = classes.iter().map(|c| *c == MarkerClass::Tracking).collect();
+        let placed = place_markers(&ctx.model, &ctx.proxy, &place_frames, &place_poses, &tracking);
+        let b = settings.registration_bound_m;
+        for (m, p) in placed.iter().enumerate() {
+            if let Some(p) = p {
+                state.offsets[m] = p.zip_map(&generic[m], |v, g| v.clamp(g - b, g + b));
+            }
+        }
+        let noise2 = settings.prior_noise_sd_m.powi(2);
+        let weight: Vec<f64> = classes
+            .iter()
+            .map(|c| match c {
+                MarkerClass::Anatomical => noise2 / settings.registration_anatomical_sd_m.powi(2),
+                MarkerClass::Tracking => noise2 / settings.registration_tracking_sd_m.powi(2),
+            })
+            .collect();
+        let offset_prior = OffsetPrior { reference: generic.clone(), weight };
+        let mut all_terms = terms.clone();
+        all_terms.push(&offset_prior);
+        let reg: Vec<bool> = (0..nm).map(|m| w_all.iter().any(|w| w[m] > 0.0)).collect();
+        let stage2 = JointProblem { weights: &w_all, registered: &reg, bound_m: b, terms: &all_terms, ..stage1 };
+        out = stage2.solve(&mut state);
+        iterations += out.iterations;
+        registered = reg.iter().filter(|r| **r).count();
+        offsets = Some(state.offsets.clone());
+    } else if placing {
+        let movable: Vec<bool> = ctx.model.markers.iter().map(|m| !m.fixed).collect();
+        let placed = place_markers(&ctx.model, &ctx.proxy, &place_frames, &place_poses, &movable);
+        offsets = Some(placed.iter().zip(&ctx.model.markers).map(|(p, m)| p.unwrap_or(m.offset)).collect());
+    }
+    out.iterations = iterations;
+    let cal = finish(state, out, &p0, &ctx.proxy, offsets, registered, started);
+    let report = prior_report(ctx, &pri, &scale, &cal);
+    if let Some(h) = report.stature_m.filter(|h| !(0.5..=2.6).contains(h)) {
+        let trial = statics.iter().chain(motions).map(|(n, _)| *n).collect::<Vec<_>>().join(", ");
+        return Err(TrialError::Implausible {
+            trial,
+            message: format!(
+                "the calibrated subject is {h:.2} m tall, outside any human range: check the marker data's units (--units) and up axis (--up), and that the model fits the marker set"
+            ),
+        });
+    }
+    Ok(Calibration { seconds: started.elapsed().as_secs_f64(), prior: report, ..cal })
+}
+
+fn prior_report(ctx: &Context, pri: &Priors, scale: &[usize], cal: &Calibration) -> PriorReport {
+    let p = &cal.proxies;
+    let mut neutral = ctx.proxy.default_proxies();
+    for &k in scale {
+        neutral[k] = p[k];
+    }
+    let (values, governed) = match &pri.anthro {
+        Some(a) => (a.survey_values(&neutral), governing(a, &ctx.proxy.default_proxies(), scale)),
+        None => (Vec::new(), vec![None; scale.len()]),
+    };
+    let scales = scale
+        .iter()
+        .zip(&governed)
+        .map(|(&k, gov)| {
+            let px = &ctx.proxy.proxies[k];
+            let v = p[k];
+            let width = (px.range.1 - px.range.0).abs();
+            let at_bound =
+                (v - px.range.0).abs() < 1e-3 * width.max(1e-9) || (px.range.1 - v).abs() < 1e-3 * width.max(1e-9);
+            let (z, dimension) = match (gov, &pri.anthro) {
+                (Some(d), Some(a)) => ((values[*d] - a.mean[*d]) / a.sd[*d], Some(a.dims[*d].name.clone())),
+                _ => ((v - pri.ratio) / ctx.settings.scale_prior_sd, None),
+            };
+            ScaleReport { name: px.name.clone(), value: v, range: px.range, at_bound, z, dimension }
+        })
+        .collect();
+    let dimensions = pri
+        .anthro
+        .as_ref()
+        .map(|a| a.dims.iter().enumerate().map(|(i, d)| (d.name.clone(), values[i], a.mean[i], a.sd[i])).collect())
+        .unwrap_or_default();
+    PriorReport {
+        landmarks: pri.landmarks.clone(),
+        subject: ctx.subject,
+        stature_m: pri.stature_dim.map(|i| values[i] * pri.stature_ratio),
+        scales,
+        dimensions,
+    }
+}
+
+/// Fails a trial whose marker cloud is far larger or smaller than the model's: the data's
+/// units are then almost certainly not what was read (millimetres read as metres: ×1000).
+fn units_check(
+    ctx: &Context,
+    name: &str,
+    obs: &[f64],
+    stride: usize,
+    weights: &[f64],
+    p0: &[f64],
+) -> Result<(), TrialError> {
+    let y = ctx.proxy.state(p0);
+    let mut ws = crate::kinematics::cpu::Workspace::new(&ctx.model);
+    crate::kinematics::cpu::forward(&ctx.model, &y, &mut ws);
+    let spread = |pts: &[Vector3<f64>]| {
+        let c = pts.iter().sum::<Vector3<f64>>() / pts.len() as f64;
+        (pts.iter().map(|p| (p - c).norm_squared()).sum::<f64>() / pts.len() as f64).sqrt()
+    };
+    let mut ratios = Vec::new();
+    let n = obs.len() / stride.max(1);
+    for f in (0..n).step_by((n / 20).max(1)) {
+        let o = &obs[f * stride..(f + 1) * stride];
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        for m in 0..stride / 3 {
+            if weights[m] > 0.0 && o[3 * m..3 * m + 3].iter().all(|v| v.is_finite()) {
+                a.push(Vector3::new(o[3 * m], o[3 * m + 1], o[3 * m + 2]));
+                b.push(ws.marker(m));
+            }
+        }
+        if a.len() >= 4 {
+            let (sa, sb) = (spread(&a), spread(&b));
+            if sb > 0.0 {
+                ratios.push(sa / sb);
+            }
+        }
+    }
+    if ratios.is_empty() {
+        return Ok(());
+    }
+    ratios.sort_by(f64::total_cmp);
+    let r = ratios[ratios.len() / 2];
+    if (0.2..=5.0).contains(&r) {
+        return Ok(());
+    }
+    let hint = [
+        (1000.0f64, "millimetres read as metres"),
+        (100.0, "centimetres read as metres"),
+        (10.0, "millimetres read as centimetres"),
+        (0.1, "centimetres read as millimetres"),
+        (0.01, "metres read as centimetres"),
+        (0.001, "metres read as millimetres"),
+    ]
+    .iter()
+    .min_by(|a, b| (r.ln() - a.0.ln()).abs().total_cmp(&(r.ln() - b.0.ln()).abs()))
+    .map(|h| h.1)
+    .unwrap_or("wrong units");
+    Err(TrialError::Implausible {
+        trial: name.into(),
+        message: format!(
+            "its markers spread {r:.3e} times as far as the model's: the data look like {hint}; give the right --units"
+        ),
+    })
+}

@@ -1,0 +1,352 @@
+//! Subject calibration on real lab files and on synthetic truth: marker registration, the
+//! anthropometric prior, one morphology per subject, outputs that reproduce the reported fit,
+//! marker-name synonyms, and implausible inputs refused.
+
+mod common;
+
+use common::shared;
+use smocap::io::MarkerTrial;
+use smocap::model::anthropometry::{Sex, SubjectInfo};
+use smocap::model::proxy::ProxyKind;
+use smocap::pipeline::convention::InputOptions;
+use smocap::pipeline::report::trial_report;
+use smocap::pipeline::subject::{calibrate_placed_with, prepare_subject, read_trial, SubjectFiles};
+use smocap::pipeline::{calibrate_subject, solve_trial, Context};
+use smocap::solve::{Calibration, FrameStatus};
+use smocap::synth::{synthesize, SynthOptions};
+use std::path::Path;
+
+/// Mean over solved frames of the per-frame marker RMSE (mm), pooled over trials.
+fn pooled_rmse_mm(results: &[smocap::pipeline::TrialResult]) -> f64 {
+    let v: Vec<f64> = results
+        .iter()
+        .flat_map(|r| r.stats.iter().filter(|s| s.status != FrameStatus::TooFewMarkers).map(|s| s.rmse_m * 1e3))
+        .collect();
+    v.iter().sum::<f64>() / v.len() as f64
+}
+
+/// AddBiomechanics' pooled mean marker RMSE (mm) from its per-marker reports: per frame, the
+/// root mean square over the markers it used (0 = not used), then the mean over all frames.
+fn addbiomechanics_rmse_mm(dir: &Path) -> f64 {
+    let mut all = Vec::new();
+    for t in ["DJ1", "DJ4", "DJ5", "walking2", "walking3", "walking4"] {
+        let text = std::fs::read_to_string(dir.join(format!("{t}_ik_per_marker_error_report.csv"))).expect("report");
+        for line in text.lines().skip(2) {
+            let e: Vec<f64> =
+                line.split(',').skip(1).filter_map(|v| v.trim().parse().ok()).filter(|v| *v > 0.0).collect();
+            if !e.is_empty() {
+                all.push((e.iter().map(|v| v * v).sum::<f64>() / e.len() as f64).sqrt() * 1e3);
+            }
+        }
+    }
+    all.iter().sum::<f64>() / all.len() as f64
+}
+
+fn assert_plausible(cal: &Calibration, what: &str) {
+    assert!(cal.suspect().is_empty(), "{what}: {:?}", cal.suspect());
+    assert!(!cal.prior.scales.is_empty(), "{what}: no scale report");
+    for s in &cal.prior.scales {
+        assert!(!s.at_bound, "{what}: {} = {} at its bound", s.name, s.value);
+        assert!(s.z.abs() <= 3.0, "{what}: {} = {:.3} is {:.2} σ from its prior", s.name, s.value, s.z);
+    }
+}
+
+#[test]
+fn opencap_generic_model_fits_better_than_addbiomechanics_with_plausible_scales() {
+    let dir = shared("datasets/opencap_addbiomechanics");
+    if !dir.exists() {
+        eprintln!("skipped: {} is absent", dir.display());
+        return;
+    }
+    let addb = addbiomechanics_rmse_mm(&dir.join("addbiomechanics"));
+    eprintln!("AddBiomechanics pooled marker RMSE: {addb:.2} mm");
+    assert!((addb - 12.74).abs() < 0.05, "AddBiomechanics' figure is {addb}");
+    for (label, subject) in [
+        ("height and mass", SubjectInfo { height_m: Some(1.84), mass_kg: Some(92.9), sex: None }),
+        ("no subject data", SubjectInfo::default()),
+    ] {
+        let files = SubjectFiles { model: Some(dir.join("unscaled_generic.osim")), subject, ..Default::default() };
+        let sub = prepare_subject(&files).expect("subject");
+        let trials: Vec<(String, MarkerTrial)> = ["DJ1", "DJ4", "DJ5", "walking2", "walking3", "walking4"]
+            .iter()
+            .map(|t| {
+                let p = dir.join("MarkerData").join(format!("{t}.trc"));
+                (t.to_string(), read_trial(&sub.ctx, &p, &InputOptions::default()).expect("trial").0)
+            })
+            .collect();
+        let motions: Vec<(&str, &MarkerTrial)> = trials.iter().map(|(n, t)| (n.as_str(), t)).collect();
+        let (cal, placed) = calibrate_placed_with(&sub.ctx, &[], &motions).expect("calibrates");
+        assert_plausible(&cal, label);
+        assert!(cal.registered > 40, "{label}: {} markers registered", cal.registered);
+        let ctx = placed.expect("registration moved the markers");
+        let results: Vec<_> = trials.iter().map(|(n, t)| solve_trial(&ctx, n, t, &cal, 2).expect("solves")).collect();
+        let ours = pooled_rmse_mm(&results);
+        eprintln!(
+            "{label}: pooled marker RMSE {ours:.2} mm (AddBiomechanics {addb:.2}), stature {:.3} m, calibration {:.2} s",
+            cal.prior.stature_m.unwrap_or(f64::NAN),
+            cal.seconds
+        );
+        assert!(ours <= addb, "{label}: {ours:.2} mm > AddBiomechanics' {addb:.2} mm");
+        // The subject is 1.84 m tall; the estimate comes from the fitted model's landmarks.
+        let h = cal.prior.stature_m.expect("stature");
+        assert!((h - 1.84).abs() < 0.08, "{label}: stature {h:.3} m");
+    }
+}
+
+/// The scaled `.osim` and the `.mot` written for a trial, read back, give the marker RMSE the
+/// report gives (over the IK setup's markers, frames the report counts).
+fn reimported_rmse_mm(scaled: &Path, mot: &Path, ik_setup: &Path, trial_path: &Path, solved: &[bool]) -> f64 {
+    let mut ctx = Context::from_files_with_markers(scaled, None, None).expect("scaled model reads");
+    ctx.apply_ik_setup(&smocap::io::osim::read_ik_setup(ik_setup).expect("ik setup")).expect("applies");
+    let (trial, _) = read_trial(&ctx, trial_path, &InputOptions::default()).expect("trial");
+    let map = smocap::pipeline::trial::match_markers(&ctx, "t", &trial).expect("matches").columns;
+    let table = smocap::io::sto::read_sto(mot).expect("mot");
+    let deg = smocap::pipeline::export::opensim_degrees(&ctx.model);
+    let p0 = ctx.proxy.default_proxies();
+    let mut ws = smocap::kinematics::cpu::Workspace::new(&ctx.model);
+    let mut sum = 0.0;
+    let mut n = 0;
+    for (f, row) in table.rows.iter().enumerate() {
+        if !solved[f] {
+            continue;
+        }
+        let mut y = ctx.proxy.state(&p0);
+        for (i, c) in ctx.model.coordinates.iter().enumerate() {
+            let v = row[table.column(&c.name).unwrap_or_else(|| panic!("{} not in the .mot", c.name))];
+            y[i] = if deg[i] { v.to_radians() } else { v };
+        }
+        smocap::kinematics::cpu::forward(&ctx.model, &y, &mut ws);
+        let (mut sq, mut used) = (0.0, 0);
+        for (m, col) in map.iter().enumerate() {
+            let Some(p) = col.and_then(|c| trial.position(f, c)) else { continue };
+            if ctx.marker_weights[m] <= 0.0 {
+                continue;
+            }
+            sq += (0..3).map(|a| (ws.markers[3 * m + a] - p[a]).powi(2)).sum::<f64>();
+            used += 1;
+        }
+        if used > 0 {
+            sum += (sq / used as f64).sqrt() * 1e3;
+            n += 1;
+        }
+    }
+    sum / n as f64
+}
+
+#[test]
+fn exported_scaled_model_and_motion_reproduce_the_reported_fit_and_beat_opensim() {
+    let cases: [(&str, &str, Option<&str>, &str, &str, &str, &str); 2] = [
+        (
+            "gait2354_subject01",
+            "gait2354_simbody.osim",
+            Some("gait2354_Scale_MarkerSet.xml"),
+            "subject01_Setup_Scale.xml",
+            "subject01_static.trc",
+            "subject01_Setup_IK.xml",
+            "subject01_walk1.trc",
+        ),
+        (
+            "rajagopal2016_walk",
+            "Rajagopal2016.osim",
+            Some("markerset_walk_preScale.xml"),
+            "scale_setup_walk_scaleOnly.xml",
+            "static_walk_1.trc",
+            "ik_setup_walk.xml",
+            "motion_capture_walk.trc",
+        ),
+    ];
+    let out = std::env::temp_dir().join(format!("smocap-calibration-{}", std::process::id()));
+    std::fs::create_dir_all(&out).expect("temp dir");
+    for (name, model, markers, scale, stat, ik, walk) in cases {
+        let dir = shared(&format!("datasets/{name}"));
+        if !dir.exists() {
+            eprintln!("skipped: {} is absent", dir.display());
+            continue;
+        }
+        let files = SubjectFiles {
+            model: Some(dir.join(model)),
+            markerset: markers.map(|m| dir.join(m)),
+            scale_setup: Some(dir.join(scale)),
+            static_trial: Some(dir.join(stat)),
+            ik_setup: Some(dir.join(ik)),
+            ..Default::default()
+        };
+        let sub = prepare_subject(&files).expect("subject");
+        let opt = InputOptions::default();
+        let st = read_trial(&sub.ctx, &dir.join(stat), &opt).expect("static").0;
+        let wt = read_trial(&sub.ctx, &dir.join(walk), &opt).expect("walk").0;
+        let (cal, placed) = calibrate_placed_with(&sub.ctx, &[("static", &st)], &[("walk", &wt)]).expect("calibrates");
+        assert_plausible(&cal, name);
+        let ctx = placed.unwrap_or(sub.ctx.clone());
+        let r = solve_trial(&ctx, walk, &wt, &cal, 2).expect("solves");
+        let reported = trial_report(&ctx, &r, None).marker_rmse_mm.expect("rmse").mean;
+        let mot = out.join(format!("{name}.mot"));
+        let osim = out.join(format!("{name}.osim"));
+        smocap::pipeline::export::write_mot(&ctx, &r, &wt, &mot).expect("mot");
+        smocap::pipeline::export::write_scaled_model(&ctx, &cal, Some(&dir.join(model)), &osim).expect("osim");
+        let solved: Vec<bool> = r.stats.iter().map(|s| s.status != FrameStatus::TooFewMarkers).collect();
+        let again = reimported_rmse_mm(&osim, &mot, &dir.join(ik), &dir.join(walk), &solved);
+        // OpenSim 4.6's own Scale + IK on the same files (../shared/reference).
+        let opensim = std::fs::read_dir(shared(&format!("reference/opensim-4.6/{name}")))
+            .ok()
+            .and_then(|d| {
+                d.filter_map(|e| e.ok().map(|e| e.path())).find(|p| p.to_string_lossy().ends_with("_summary.json"))
+            })
+            .and_then(|p| std::fs::read_to_string(p).ok())
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .and_then(|v| v["rms_mean_m"].as_f64())
+            .map(|v| v * 1e3);
+        eprintln!(
+            "{name}: reported {reported:.3} mm, re-imported .osim + .mot {again:.3} mm, OpenSim {:?} mm, stature {:?} m",
+            opensim,
+            cal.prior.stature_m
+        );
+        assert!((again - reported).abs() <= 0.1, "{name}: outputs give {again:.3} mm, the report {reported:.3} mm");
+        if let Some(o) = opensim {
+            assert!(again <= o, "{name}: {again:.2} mm > OpenSim's {o:.2} mm");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// The shipped model, its misplaced tracking markers declared as such in the profile.
+fn shipped_with_tracking(names: &[&str]) -> Context {
+    let mut ctx = Context::shipped().expect("shipped");
+    ctx.profile.markers.tracking = names.iter().map(|s| s.to_string()).collect();
+    ctx
+}
+
+#[test]
+fn registration_recovers_misplaced_tracking_markers_within_5_mm() {
+    let tracking = ["RTHI", "LTHI", "RTIB", "LTIB", "RUPA", "LUPA", "RFRM", "LFRM"];
+    let ctx = shipped_with_tracking(&tracking);
+    // The truth: the tracking markers sit 2–4 cm from where the model has them.
+    let mut truth = ctx.model.clone();
+    let mut moved = Vec::new();
+    for (i, name) in tracking.iter().enumerate() {
+        let m = truth.marker_index(name).expect("marker");
+        let d = nalgebra::Vector3::new(
+            0.02 * ((i % 3) as f64 - 1.0),
+            0.03 * (((i + 1) % 3) as f64 - 1.0),
+            0.025 * (if i % 2 == 0 { 1.0 } else { -1.0 }),
+        );
+        truth.markers[m].offset += d;
+        moved.push((m, truth.markers[m].offset));
+    }
+    let opt = SynthOptions { frames: 400, seed: 11, noise_m: 0.001, ..SynthOptions::default() };
+    let s = synthesize(&truth, &ctx.proxy, &opt);
+    let cal = calibrate_subject(&ctx, &[("walk", &s.trial)]).expect("calibrates");
+    let offsets = cal.marker_offsets.as_ref().expect("registered");
+    let y = ctx.proxy.state(&s.truth.proxies[0]);
+    for (m, o_true) in moved {
+        let b = ctx.model.markers[m].body;
+        let sc = nalgebra::Vector3::new(
+            y[ctx.model.scale_index(b, 0)],
+            y[ctx.model.scale_index(b, 1)],
+            y[ctx.model.scale_index(b, 2)],
+        );
+        let err_mm = (offsets[m] - o_true).component_mul(&sc).norm() * 1e3;
+        let was_mm = (ctx.model.markers[m].offset - o_true).component_mul(&sc).norm() * 1e3;
+        eprintln!(
+            "{}: registered within {err_mm:.2} mm of the truth (model: {was_mm:.1} mm off)",
+            ctx.model.markers[m].name
+        );
+        assert!(err_mm < 5.0, "{}: {err_mm:.2} mm from the truth", ctx.model.markers[m].name);
+    }
+}
+
+/// CMU's names for the Plug-in Gait markers the shipped model has.
+const CMU: &[(&str, &str)] = &[
+    ("LASI", "LFWT"),
+    ("RASI", "RFWT"),
+    ("LPSI", "LBWT"),
+    ("RPSI", "RBWT"),
+    ("LTIB", "LSHN"),
+    ("RTIB", "RSHN"),
+    ("RBAK", "RBAC"),
+];
+
+#[test]
+fn cmu_style_plug_in_gait_names_match_through_synonyms_and_fit_as_well() {
+    let ctx = Context::shipped().expect("shipped");
+    let opt = SynthOptions { frames: 300, seed: 5, noise_m: 0.002, ..SynthOptions::default() };
+    let s = synthesize(&ctx.model, &ctx.proxy, &opt);
+    let mut renamed = s.trial.clone();
+    for l in &mut renamed.labels {
+        if let Some((_, cmu)) = CMU.iter().find(|(pig, _)| pig == l) {
+            *l = cmu.to_string();
+        }
+    }
+    let mut fits = Vec::new();
+    for (label, t) in [("canonical", &s.trial), ("CMU", &renamed)] {
+        let cal = calibrate_subject(&ctx, &[(label, t)]).expect("calibrates");
+        let r = solve_trial(&ctx, label, t, &cal, 2).expect("solves");
+        assert!(r.unmatched_model.is_empty(), "{label}: unmatched {:?}", r.unmatched_model);
+        if label == "CMU" {
+            for (pig, cmu) in CMU {
+                assert!(r.renamed.contains(&(cmu.to_string(), pig.to_string())), "{cmu} → {pig} not reported");
+            }
+        }
+        fits.push(trial_report(&ctx, &r, Some(&s.truth)).marker_rmse_mm.expect("rmse").mean);
+    }
+    eprintln!("canonical {:.2} mm, CMU names {:.2} mm", fits[0], fits[1]);
+    assert!((fits[0] - fits[1]).abs() <= 2.0);
+}
+
+#[test]
+fn millimetres_read_as_metres_are_refused_naming_the_cause() {
+    let ctx = Context::shipped().expect("shipped");
+    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 50, seed: 2, ..SynthOptions::default() });
+    let mut t = s.trial.clone();
+    t.positions.iter_mut().for_each(|v| *v *= 1000.0);
+    let e = calibrate_subject(&ctx, &[("mm", &t)]).expect_err("refused").to_string();
+    assert!(e.contains("millimetres read as metres"), "{e}");
+}
+
+#[test]
+fn implausible_or_unknown_subject_data_is_a_clear_error() {
+    for (info, word) in [
+        (SubjectInfo { height_m: Some(-1.7), ..Default::default() }, "height"),
+        (SubjectInfo { height_m: Some(175.0), ..Default::default() }, "height"),
+        (SubjectInfo { mass_kg: Some(0.0), ..Default::default() }, "mass"),
+        (SubjectInfo { mass_kg: Some(f64::NAN), ..Default::default() }, "mass"),
+    ] {
+        let e = info.validate().expect_err("refused").to_string();
+        assert!(e.contains(word), "{e}");
+        let files = SubjectFiles { subject: info, ..Default::default() };
+        assert!(prepare_subject(&files).is_err());
+    }
+    let e = "unknown".parse::<Sex>().expect_err("refused").to_string();
+    assert!(e.contains("male, female"), "{e}");
+    assert_eq!("F".parse::<Sex>().ok(), Some(Sex::Female));
+}
+
+#[test]
+fn numbered_markers_sharing_a_prefix_are_a_tracking_cluster_when_the_file_flags_none() {
+    let mut model = Context::shipped().expect("shipped").model;
+    // `T12` shares its one-letter stem with the model's `T10`: vertebrae, not a cluster.
+    for (i, n) in ["r_thigh1", "r_thigh2", "r_thigh3", "T12"].iter().enumerate() {
+        model.markers[i].name = n.to_string();
+    }
+    let classes = smocap::model::marker_classes(&model, &[], &["r_thigh3".into()]);
+    use smocap::model::MarkerClass::*;
+    assert_eq!(&classes[..4], &[Tracking, Tracking, Anatomical, Anatomical]);
+    // A file that flags any marker: unflagged markers are anatomical.
+    model.markers[10].class = Some(Tracking);
+    let classes = smocap::model::marker_classes(&model, &[], &[]);
+    assert_eq!(&classes[..2], &[Anatomical, Anatomical]);
+    assert_eq!(classes[10], Tracking);
+}
+
+#[test]
+fn trials_are_solved_with_the_calibrated_morphology_in_every_frame() {
+    let ctx = Context::shipped().expect("shipped");
+    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 150, seed: 4, ..SynthOptions::default() });
+    let cal = calibrate_subject(&ctx, &[("walk", &s.trial)]).expect("calibrates");
+    let r = solve_trial(&ctx, "walk", &s.trial, &cal, 2).expect("solves");
+    for (k, px) in ctx.proxy.proxies.iter().enumerate().filter(|(_, p)| p.kind == ProxyKind::Scale) {
+        for p in &r.proxies {
+            assert_eq!(p[k], cal.proxies[k], "{} moved in a frame", px.name);
+        }
+    }
+}
