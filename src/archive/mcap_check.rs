@@ -147,10 +147,12 @@ pub fn check(buf: &[u8]) -> Result<(), McapFormatError> {
     }
     let (&footer, _) = starts.last_key_value().expect("a footer");
     let (summary_start, summary_crc) = (u64_at(footer + 9), u32_at(footer + 9 + 16));
-    if summary_start != 0 && summary_crc != 0 && summary_start <= footer {
-        if crc32fast::hash(&buf[summary_start as usize..footer as usize + 9 + 16]) != summary_crc {
-            return Err(at(summary_start, "the summary's CRC does not match (the file is damaged)"));
-        }
+    if summary_start != 0
+        && summary_crc != 0
+        && summary_start <= footer
+        && crc32fast::hash(&buf[summary_start as usize..footer as usize + 9 + 16]) != summary_crc
+    {
+        return Err(at(summary_start, "the summary's CRC does not match (the file is damaged)"));
     }
     // Every offset that readers follow lands on the start of a record of the right kind and
     // length, so nothing is parsed that was not checked above.
