@@ -102,7 +102,14 @@ fn writing_frames_allocates_far_less_than_once_per_frame() {
     let names = TrialNames::default();
     let opt = WriterOptions { chunk_size: 1 << 30, ..WriterOptions::default() };
     let mut w = TrialWriter::create(&out, &ctx, "t", &s.trial, &cal, &names, &opt).unwrap();
-    let stats = FrameStats { iterations: 1, accepted: 1, energy: 1e-3, rmse_m: 2e-3, markers_used: 53, status: FrameStatus::Converged };
+    let stats = FrameStats {
+        iterations: 1,
+        accepted: 1,
+        energy: 1e-3,
+        rmse_m: 2e-3,
+        markers_used: 53,
+        status: FrameStatus::Converged,
+    };
     // The frames, made before counting (the solver hands them over as they are).
     let frames: Vec<SolvedFrame> = (0..n)
         .map(|f| SolvedFrame { index: f, proxies: s.truth.proxies[f].clone(), stats, seconds: 1e-4, bridged: false })

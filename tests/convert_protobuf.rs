@@ -108,7 +108,10 @@ fn tf_is_one_tree_rooted_at_z_up_world_with_the_head_above_the_feet() {
     assert_upright(&path, "head", &["calcn_r", "calcn_l", "toes_r"]);
     let by = messages(&path);
     let tf = proto::FrameTransforms::decode(&by["/tf"][0].1[..]).unwrap();
-    assert_eq!((tf.transforms[0].parent_frame_id.as_str(), tf.transforms[0].child_frame_id.as_str()), ("world", "model"));
+    assert_eq!(
+        (tf.transforms[0].parent_frame_id.as_str(), tf.transforms[0].child_frame_id.as_str()),
+        ("world", "model")
+    );
     // Every body hangs off its parent body, not off world: the tree has depth.
     let femur = tf.transforms.iter().find(|t| t.child_frame_id == "femur_r").unwrap();
     assert_eq!(femur.parent_frame_id, "pelvis");
@@ -163,7 +166,10 @@ fn every_channel_decodes_and_the_skeleton_and_subject_come_once() {
     let epoch = smocap::archive::mcap_out::DEFAULT_EPOCH_NS;
     for (f, (t, data)) in by["/smocap/state"].iter().enumerate() {
         let s = proto::State::decode(&data[..]).unwrap();
-        assert_eq!((s.frame as usize, s.q.len(), s.scale_drift_ppm.len()), (f, sub.coordinates.len(), sub.scale_proxies.len()));
+        assert_eq!(
+            (s.frame as usize, s.q.len(), s.scale_drift_ppm.len()),
+            (f, sub.coordinates.len(), sub.scale_proxies.len())
+        );
         assert_eq!(*t, epoch + (s.time * 1e9).round() as u64, "log time = epoch + frame time");
         let ts = s.timestamp.unwrap();
         assert_eq!(ts.seconds as u64 * 1_000_000_000 + ts.nanos as u64, *t);

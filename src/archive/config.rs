@@ -52,6 +52,60 @@ fn one() -> u64 {
     1
 }
 
+/// Most subjects of a synthetic dataset.
+pub const MAX_SYNTHETIC_SUBJECTS: usize = 1000;
+/// Most frames one synthetic subject may have, static trial included (`(trials + 1) · frames`):
+/// a subject's motion is synthesized whole, about 2.5 kB per frame on the shipped model.
+pub const MAX_SYNTHETIC_FRAMES_PER_SUBJECT: usize = 200_000;
+
+impl SyntheticSpec {
+    /// Checks the counts: at least one subject, trial and frame; at most
+    /// [`MAX_SYNTHETIC_SUBJECTS`] subjects and [`MAX_SYNTHETIC_FRAMES_PER_SUBJECT`] frames per
+    /// subject.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(1..=MAX_SYNTHETIC_SUBJECTS).contains(&self.subjects) {
+            return Err(format!(
+                "synthetic `subjects` = {} must be between 1 and {MAX_SYNTHETIC_SUBJECTS}",
+                self.subjects
+            ));
+        }
+        if self.trials == 0 || self.frames == 0 {
+            return Err("synthetic `trials` and `frames` must be at least 1".into());
+        }
+        let per_subject = self.trials.checked_add(1).and_then(|t| t.checked_mul(self.frames));
+        if per_subject.is_none_or(|n| n > MAX_SYNTHETIC_FRAMES_PER_SUBJECT) {
+            return Err(format!(
+                "synthetic (trials + 1) × frames = ({} + 1) × {} exceeds {MAX_SYNTHETIC_FRAMES_PER_SUBJECT} frames per subject",
+                self.trials, self.frames
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Checks a dataset name: one path component (outputs go to `<out>/<name>/`), without
+/// separators, not `.`/`..`, not starting with `.` (reserved for smocap's own files), at most
+/// 255 bytes.
+pub fn validate_name(name: &str) -> Result<(), String> {
+    let bad = |why: &str| Err(format!("name '{}' {why}", name.escape_debug()));
+    if name.is_empty() {
+        return bad("is empty");
+    }
+    if name.len() > 255 {
+        return bad("is longer than 255 bytes");
+    }
+    if name.contains(['/', '\\', '\0']) {
+        return bad("must be one path component (no `/` or `\\`)");
+    }
+    if name.starts_with('.') {
+        return bad("must not start with `.` (and cannot be `.` or `..`)");
+    }
+    if name.chars().any(char::is_control) {
+        return bad("must not contain control characters");
+    }
+    Ok(())
+}
+
 /// One `[[dataset]]` entry; paths as written (see [`Dataset::resolve`]).
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -184,6 +238,12 @@ pub fn read_datasets(path: &Path, only: Option<&str>) -> Result<Vec<Dataset>, Co
     for mut d in parsed.dataset {
         let invalid =
             |message: &str| ConfigError::Invalid { file: file.clone(), name: d.name.clone(), message: message.into() };
+        if let Err(why) = validate_name(&d.name) {
+            return Err(invalid(&why));
+        }
+        if let Some(Err(why)) = d.synthetic.as_ref().map(SyntheticSpec::validate) {
+            return Err(invalid(&why));
+        }
         if d.trials.is_empty() {
             return Err(invalid("`trials` needs at least one glob"));
         }

@@ -4,7 +4,7 @@
 
 use super::config::Dataset;
 use super::discover::{discover, SubjectGroup, TrialEntry};
-use super::inspect::recorded_input_hash;
+use super::inspect::recorded_run;
 use super::mcap_out::{partial_path, RunInfo, WriterOptions};
 use super::shard::{assign, Shard};
 use super::trial_job::{read_for, solve_and_write, Calibrated};
@@ -13,6 +13,7 @@ use crate::pipeline::stats::P50P90;
 use crate::pipeline::subject::prepare_subject;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// How to run a conversion.
@@ -38,7 +39,8 @@ pub struct TrialOutcome {
     /// Path relative to the dataset root.
     pub trial: String,
     pub output: String,
-    /// "ok", "skipped" (already converted, `--resume`) or "failed".
+    /// "ok", "skipped" (already converted, `--resume`), "suspect" (converted, but see `error`:
+    /// [`crate::pipeline::verdict`]) or "failed".
     pub status: String,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
@@ -52,12 +54,22 @@ pub struct TrialOutcome {
     pub rmse_mm: Option<P50P90>,
 }
 
-/// A dataset's fate (skipped ones say why).
+/// A dataset's fate (skipped ones say why: its root is absent; failed ones too: a bad glob, a
+/// synthetic dataset that could not be generated, an unreadable folder).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct DatasetNote {
     pub name: String,
     pub root: String,
     pub skipped: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub failed: Option<String>,
+}
+
+/// Errors that stop a conversion before any trial.
+#[derive(Debug, thiserror::Error)]
+pub enum ConvertError {
+    #[error(transparent)]
+    Lock(#[from] super::lock::LockError),
 }
 
 /// The run: every trial found (in this shard), with its status.
@@ -71,8 +83,19 @@ pub struct ConvertSummary {
 }
 
 impl ConvertSummary {
+    /// Trials that failed or are suspect.
     pub fn failed(&self) -> usize {
-        self.trials.iter().filter(|t| t.status == "failed").count()
+        self.trials.iter().filter(|t| t.status == "failed" || t.status == "suspect").count()
+    }
+
+    /// Datasets that failed as a whole (no trial of theirs could be looked at).
+    pub fn failed_datasets(&self) -> usize {
+        self.datasets.iter().filter(|d| d.failed.is_some()).count()
+    }
+
+    /// Trials converted or already done (`ok` or `skipped`).
+    pub fn succeeded(&self) -> usize {
+        self.trials.iter().filter(|t| t.status == "ok" || t.status == "skipped").count()
     }
 
     /// One line per dataset: trials ok/skipped/failed, frames, frames/s, p50/p90 figures.
@@ -91,11 +114,16 @@ impl ConvertSummary {
         );
         for d in &self.datasets {
             let ts: Vec<&TrialOutcome> = self.trials.iter().filter(|t| t.dataset == d.name).collect();
+            if let Some(why) = &d.failed {
+                s += &format!("{:<24} failed: {why}\n", d.name);
+                continue;
+            }
             if let Some(why) = &d.skipped {
                 s += &format!("{:<24} skipped: {why}\n", d.name);
                 continue;
             }
-            let count = |st: &str| ts.iter().filter(|t| t.status == st).count();
+            let count =
+                |st: &str| ts.iter().filter(|t| t.status == st || st == "failed" && t.status == "suspect").count();
             let solved: Vec<&&TrialOutcome> = ts.iter().filter(|t| t.status == "ok").collect();
             let frames: usize = solved.iter().map(|t| t.frames).sum();
             let secs: f64 = solved.iter().map(|t| t.solve_s).sum();
@@ -131,8 +159,53 @@ pub fn output_path(out: &Path, dataset: &str, rel: &str) -> PathBuf {
     out.join(dataset).join(Path::new(rel).with_extension("mcap"))
 }
 
-/// Converts `datasets`; `log` receives one progress line per trial (and notes).
-pub fn convert(datasets: &[Dataset], opt: &ConvertOptions, log: &(dyn Fn(&str) + Sync)) -> ConvertSummary {
+/// True when `path` lies inside `out`: `out` followed by plain names only (no `..`, no root, no
+/// prefix), as [`output_path`] gives for a valid dataset name and a discovered trial.
+pub fn inside(out: &Path, path: &Path) -> bool {
+    use std::path::Component;
+    path.strip_prefix(out).is_ok_and(|rel| {
+        rel.components().next().is_some() && rel.components().all(|c| matches!(c, Component::Normal(_)))
+    })
+}
+
+/// Trials that cannot be converted because of where their output would go, with the reason:
+/// outside `--out`, or the same output as another trial (`walk01.trc` and `walk01.TRC`, or
+/// `walk01.c3d` and `walk01.trc`, both give `walk01.mcap`; on a case-insensitive file system,
+/// so do `walk01.trc` and `WALK01.trc`). Keyed by (dataset index, trial path).
+fn output_conflicts(datasets: &[Dataset], groups: &[SubjectGroup], out: &Path) -> BTreeMap<(usize, String), String> {
+    let mut by_output: BTreeMap<String, Vec<(usize, &TrialEntry)>> = BTreeMap::new();
+    let mut bad = BTreeMap::new();
+    for g in groups {
+        for t in &g.trials {
+            let o = output_path(out, &datasets[g.dataset].name, &t.rel);
+            if !inside(out, &o) {
+                bad.insert((g.dataset, t.rel.clone()), format!("its output {} would lie outside --out", o.display()));
+                continue;
+            }
+            by_output.entry(o.to_string_lossy().to_lowercase()).or_default().push((g.dataset, t));
+        }
+    }
+    for list in by_output.values().filter(|l| l.len() > 1) {
+        let names: Vec<String> = list.iter().map(|(_, t)| t.path.display().to_string()).collect();
+        for (d, t) in list {
+            let o = output_path(out, &datasets[*d].name, &t.rel);
+            bad.insert(
+                (*d, t.rel.clone()),
+                format!("output collision: {} would all write {}; rename one", names.join(" and "), o.display()),
+            );
+        }
+    }
+    bad
+}
+
+/// Converts `datasets`; `log` receives one progress line per trial (and notes). Holds the
+/// output folder's lock ([`super::lock`]) for the whole run.
+pub fn convert(
+    datasets: &[Dataset],
+    opt: &ConvertOptions,
+    log: &(dyn Fn(&str) + Sync),
+) -> Result<ConvertSummary, ConvertError> {
+    let _lock = super::lock::lock_out(&opt.out)?;
     let mut notes = Vec::new();
     let mut groups: Vec<SubjectGroup> = Vec::new();
     for (i, d) in datasets.iter().enumerate() {
@@ -141,22 +214,39 @@ pub fn convert(datasets: &[Dataset], opt: &ConvertOptions, log: &(dyn Fn(&str) +
             (Some(_), None) => opt.out.join(".synthetic").join(&d.name),
             (None, r) => r.clone().unwrap_or_default(),
         };
-        let mut note = DatasetNote { name: d.name.clone(), root: root.display().to_string(), skipped: None };
-        let found = match &d.synthetic {
-            Some(spec) => super::synthetic::generate(spec, &root).map_err(|e| format!("generating it: {e:#}")),
-            None if !root.is_dir() => Err(format!("root {} not found", root.display())),
-            None => Ok(()),
-        }
-        .and_then(|()| discover(i, d, &root).map_err(|e| e.to_string()));
-        match found {
-            Ok(g) => groups.extend(g),
-            Err(why) => {
-                log(&format!("note: dataset '{}' skipped: {why}", d.name));
-                note.skipped = Some(why);
+        let mut note =
+            DatasetNote { name: d.name.clone(), root: root.display().to_string(), skipped: None, failed: None };
+        if let Err(why) = super::config::validate_name(&d.name) {
+            note.failed = Some(why);
+        } else if d.synthetic.is_none() && !root.is_dir() {
+            let why = format!("root {} not found", root.display());
+            log(&format!("note: dataset '{}' skipped: {why}", d.name));
+            note.skipped = Some(why);
+        } else {
+            let found = match &d.synthetic {
+                Some(spec) => super::synthetic::generate(spec, &root).map_err(|e| {
+                    let (top, cause) = (e.to_string(), e.root_cause().to_string());
+                    if top.contains(&cause) {
+                        format!("generating it: {top}")
+                    } else {
+                        format!("generating it: {top}: {cause}")
+                    }
+                }),
+                None => Ok(()),
             }
+            .and_then(|()| discover(i, d, &root).map_err(|e| e.to_string()));
+            match found {
+                Ok(g) => groups.extend(g),
+                Err(why) => note.failed = Some(why),
+            }
+        }
+        if let Some(why) = &note.failed {
+            log(&format!("error: dataset '{}' failed: {why}", d.name));
         }
         notes.push(note);
     }
+    // Found over the whole archive (before sharding), so every shard agrees.
+    let conflicts = output_conflicts(datasets, &groups, &opt.out);
     if let Some(s) = opt.shard {
         let owner = assign(&groups, s.count);
         groups = groups.into_iter().zip(owner).filter(|(_, o)| *o == s.index).map(|(g, _)| g).collect();
@@ -170,17 +260,18 @@ pub fn convert(datasets: &[Dataset], opt: &ConvertOptions, log: &(dyn Fn(&str) +
     let report = |t: &TrialOutcome| {
         let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
         if let Some(p) = &opt.progress {
-            let solved = (t.status == "ok").then_some(t.frames as u64);
-            p.finished(&format!("{}/{}", t.dataset, t.trial), t.status == "failed", solved);
+            let solved = (t.status == "ok" || t.status == "suspect").then_some(t.frames as u64);
+            p.finished(&format!("{}/{}", t.dataset, t.trial), t.status == "failed" || t.status == "suspect", solved);
         }
         let what = match (&t.status[..], &t.error) {
             ("failed", Some(e)) => format!("failed: {e}"),
+            ("suspect", Some(e)) => format!("suspect ({} frames, {:.2} s): {e}", t.frames, t.solve_s),
             (st, _) => format!("{st} ({} frames, {:.2} s)", t.frames, t.solve_s),
         };
         log(&format!("[{k}/{total}] {}/{}: {what}", t.dataset, t.trial));
     };
     let run = || -> Vec<TrialOutcome> {
-        groups.par_iter().flat_map_iter(|g| subject(&datasets[g.dataset], g, opt, &report)).collect()
+        groups.par_iter().flat_map_iter(|g| subject(&datasets[g.dataset], g, opt, &conflicts, &report)).collect()
     };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(opt.jobs.max(1)).build();
     let mut trials = match &pool {
@@ -188,12 +279,12 @@ pub fn convert(datasets: &[Dataset], opt: &ConvertOptions, log: &(dyn Fn(&str) +
         Err(_) => run(),
     };
     trials.sort_by(|a, b| (&a.dataset, &a.trial).cmp(&(&b.dataset, &b.trial)));
-    ConvertSummary {
+    Ok(ConvertSummary {
         smocap_version: env!("CARGO_PKG_VERSION").into(),
         shard: opt.shard.map(|s| format!("{}/{}", s.index, s.count)),
         datasets: notes,
         trials,
-    }
+    })
 }
 
 fn outcome(
@@ -233,21 +324,41 @@ fn subject(
     d: &Dataset,
     g: &SubjectGroup,
     opt: &ConvertOptions,
+    conflicts: &BTreeMap<(usize, String), String>,
     report: &(dyn Fn(&TrialOutcome) + Sync),
 ) -> Vec<TrialOutcome> {
     let mut outcomes = Vec::new();
     let mut todo = Vec::new();
     for t in &g.trials {
         let out = output_path(&opt.out, &d.name, &t.rel);
+        if let Some(why) = conflicts.get(&(g.dataset, t.rel.clone())) {
+            // Nothing is written or removed at a contested (or outside) path.
+            outcomes.push(outcome(d, g, t, &out, "failed", Some(why.clone())));
+            continue;
+        }
         let hash = super::sha256_file(&t.path);
         match hash {
             Err(e) => outcomes.push(failed(d, g, t, &out, format!("{}: {e}", t.path.display()))),
-            Ok(h) if opt.resume && out.is_file() && recorded_input_hash(&out).as_deref() == Some(h.as_str()) => {
-                // A temporary file left by an interrupted run is not needed.
-                let _ = std::fs::remove_file(partial_path(&out));
-                outcomes.push(outcome(d, g, t, &out, "skipped", None))
+            Ok(h) => {
+                // Done when the output is complete (verified) and records this input.
+                let done = (opt.resume && out.is_file())
+                    .then(|| recorded_run(&out))
+                    .flatten()
+                    .filter(|run| run.get("input_sha256") == Some(&h));
+                match done {
+                    Some(run) => {
+                        // A temporary file left by an interrupted run is not needed.
+                        let _ = std::fs::remove_file(partial_path(&out));
+                        // A suspect result stays suspect (the same input gives the same result).
+                        let (status, why) = match run.get("verdict").map(String::as_str) {
+                            Some("suspect") => ("suspect", run.get("verdict_reason").cloned()),
+                            _ => ("skipped", None),
+                        };
+                        outcomes.push(outcome(d, g, t, &out, status, why));
+                    }
+                    None => todo.push((t, out, h)),
+                }
             }
-            Ok(h) => todo.push((t, out, h)),
         }
     }
     outcomes.iter().for_each(report);
@@ -380,7 +491,7 @@ fn solve_one(
             ms_per_frame: Some(s.ms_per_frame),
             iterations: Some(s.iterations),
             rmse_mm: s.rmse_mm,
-            ..outcome(d, g, t, out, "ok", None)
+            ..outcome(d, g, t, out, if s.suspect.is_some() { "suspect" } else { "ok" }, s.suspect.clone())
         },
         Err(e) => fail(e),
     }

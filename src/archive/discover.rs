@@ -13,6 +13,8 @@ pub enum DiscoverError {
     Glob { dataset: String, glob: String, source: globset::Error },
     #[error("{path}: {source}")]
     Io { path: String, source: std::io::Error },
+    #[error("{root}: more than {max} files and folders below it; is `root` right?")]
+    TooMany { root: String, max: usize },
 }
 
 /// One motion trial.
@@ -41,19 +43,39 @@ impl SubjectGroup {
     }
 }
 
-/// Every file under `root`, as `/`-separated paths relative to it, sorted.
+/// Most directory entries discovery looks at under one dataset root (files and folders).
+pub const MAX_ENTRIES: usize = 1_000_000;
+/// Deepest folder level below a dataset root that discovery descends to.
+pub const MAX_DEPTH: usize = 64;
+
+/// Every regular file under `root` (a symbolic link to a regular file counts; links to folders
+/// are not followed, so link loops cannot make a walk endless; FIFOs, sockets and devices are
+/// left), as `/`-separated paths relative to it, sorted; the walk stays on `root`'s file
+/// system and stops with an error past [`MAX_ENTRIES`] entries.
 fn walk(root: &Path) -> Result<Vec<String>, DiscoverError> {
+    walk_bounded(root, MAX_ENTRIES)
+}
+
+/// [`walk`] stopping past `max_entries` entries.
+fn walk_bounded(root: &Path, max_entries: usize) -> Result<Vec<String>, DiscoverError> {
     let mut out = Vec::new();
-    let mut stack = vec![root.to_path_buf()];
-    while let Some(dir) = stack.pop() {
-        let io = |source| DiscoverError::Io { path: dir.display().to_string(), source };
-        for e in std::fs::read_dir(&dir).map_err(io)? {
-            let p = e.map_err(io)?.path();
-            if p.is_dir() {
-                stack.push(p);
-            } else if let Ok(rel) = p.strip_prefix(root) {
-                out.push(rel.components().map(|c| c.as_os_str().to_string_lossy()).collect::<Vec<_>>().join("/"));
-            }
+    let walker = walkdir::WalkDir::new(root).follow_links(false).same_file_system(true).max_depth(MAX_DEPTH);
+    for (n, e) in walker.into_iter().enumerate() {
+        if n >= max_entries {
+            return Err(DiscoverError::TooMany { root: root.display().to_string(), max: max_entries });
+        }
+        let e = e.map_err(|e| {
+            let path = e.path().unwrap_or(root).display().to_string();
+            let source = e.into_io_error().unwrap_or_else(|| std::io::Error::other("unreadable entry"));
+            DiscoverError::Io { path, source }
+        })?;
+        let t = e.file_type();
+        let regular = t.is_file() || t.is_symlink() && std::fs::metadata(e.path()).is_ok_and(|m| m.is_file());
+        if !regular {
+            continue;
+        }
+        if let Ok(rel) = e.path().strip_prefix(root) {
+            out.push(rel.components().map(|c| c.as_os_str().to_string_lossy()).collect::<Vec<_>>().join("/"));
         }
     }
     out.sort();
@@ -170,4 +192,22 @@ pub fn discover(index: usize, d: &Dataset, root: &Path) -> Result<Vec<SubjectGro
         }
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_walk_past_its_entry_bound_stops_with_an_error() {
+        let root = std::env::temp_dir().join(format!("smocap-walk-bound-{}", std::process::id()));
+        std::fs::create_dir_all(root.join("a/b")).unwrap();
+        for i in 0..20 {
+            std::fs::write(root.join(format!("a/b/t{i}.trc")), "").unwrap();
+        }
+        assert_eq!(walk_bounded(&root, 100).unwrap().len(), 20);
+        let e = walk_bounded(&root, 10).unwrap_err().to_string();
+        assert!(e.contains("more than 10 files and folders"), "{e}");
+        let _ = std::fs::remove_dir_all(&root);
+    }
 }

@@ -2,11 +2,11 @@
 //! `/smocap/subject`, with the frame's marker RMSE and status from `/smocap/stats`) as an OpenSim motion (`.mot`,
 //! the columns and degrees of `smocap solve --mot-dir`) or a CSV table.
 
+use super::mcap_out::SCALED_MODEL_ATTACHMENT;
+use super::proto;
 use crate::io::sto::{self, StoError};
 use crate::model::Model;
 use crate::pipeline::export::coordinate_table;
-use super::mcap_out::SCALED_MODEL_ATTACHMENT;
-use super::proto;
 use prost::Message as _;
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -25,6 +25,8 @@ pub enum ExportError {
     Csv { file: String, source: csv::Error },
     #[error(transparent)]
     Sto(#[from] StoError),
+    #[error(transparent)]
+    Read(#[from] super::inspect::InspectError),
 }
 
 /// One frame of the state channel (times in s since the trial's first sample).
@@ -60,17 +62,24 @@ pub struct TrialRecord {
 }
 
 /// Reads the frames of `path` (a file written by `smocap convert`: protobuf channels, or the
-/// JSON channels of files written before protobuf was the encoding).
+/// JSON channels of files written before protobuf was the encoding); its MCAP structure is
+/// checked first ([`super::inspect::read_checked`]).
 pub fn read_trial_record(path: &Path) -> Result<TrialRecord, ExportError> {
-    let file = path.display().to_string();
-    let buf = std::fs::read(path).map_err(|source| ExportError::Io { file: file.clone(), source })?;
+    parse_trial_record(&super::inspect::read_checked(path)?, &path.display().to_string())
+}
+
+/// The frames of the MCAP file `buf` (named `file` in errors), structure checked first.
+pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportError> {
+    let file = file.to_string();
+    super::mcap_check::check(buf)
+        .map_err(|source| super::inspect::InspectError::Format { file: file.clone(), source })?;
     let mc = |source| ExportError::Mcap { file: file.clone(), source };
     let bad = |what: String| ExportError::Content { file: file.clone(), what };
-    let summary = mcap::Summary::read(&buf).map_err(mc)?;
+    let summary = mcap::Summary::read(buf).map_err(mc)?;
     let (mut time_offset, mut scaled_model, mut model_source) = (0.0, None, None);
     if let Some(summary) = &summary {
         for idx in &summary.metadata_indexes {
-            let m = mcap::read::metadata(&buf, idx).map_err(mc)?;
+            let m = mcap::read::metadata(buf, idx).map_err(mc)?;
             if m.name != "smocap.run" {
                 continue;
             }
@@ -85,9 +94,10 @@ pub fn read_trial_record(path: &Path) -> Result<TrialRecord, ExportError> {
                 "scaled_model.osim" => false,
                 _ => continue,
             };
-            let data = mcap::read::attachment(&buf, a).map_err(mc)?.data;
+            let data = mcap::read::attachment(buf, a).map_err(mc)?.data;
             let text = if compressed {
-                zstd::stream::decode_all(&data[..]).map_err(|e| bad(format!("{}: {e}", a.name)))?
+                // Bounded: a corrupt size field cannot make it allocate without limit.
+                zstd::bulk::decompress(&data, 256 << 20).map_err(|e| bad(format!("{}: {e}", a.name)))?
             } else {
                 data.into_owned()
             };
@@ -105,7 +115,7 @@ pub fn read_trial_record(path: &Path) -> Result<TrialRecord, ExportError> {
         rmse: Option<f64>,
         status: Option<String>,
     }
-    for msg in mcap::MessageStream::new(&buf).map_err(mc)? {
+    for msg in mcap::MessageStream::new(buf).map_err(mc)? {
         let msg = msg.map_err(mc)?;
         let topic = msg.channel.topic.as_str();
         let what = |e: &dyn std::fmt::Display| bad(format!("{topic} message {}: {e}", msg.sequence));

@@ -80,7 +80,12 @@ pub struct WriterOptions {
 
 impl Default for WriterOptions {
     fn default() -> Self {
-        WriterOptions { epoch_ns: DEFAULT_EPOCH_NS, zstd_level: DEFAULT_ZSTD_LEVEL, chunk_size: 1 << 20, timings: false }
+        WriterOptions {
+            epoch_ns: DEFAULT_EPOCH_NS,
+            zstd_level: DEFAULT_ZSTD_LEVEL,
+            chunk_size: 1 << 20,
+            timings: false,
+        }
     }
 }
 
@@ -555,7 +560,8 @@ fn put(
     msg.encode(buf).expect("a Vec grows as needed");
     let header = MessageHeader { channel_id: ch, sequence, log_time: ns, publish_time: ns };
     let w = w.as_mut().expect("present until finished");
-    w.write_to_known_channel(&header, buf).map_err(|source| McapOutError::Mcap { file: tmp.display().to_string(), source })
+    w.write_to_known_channel(&header, buf)
+        .map_err(|source| McapOutError::Mcap { file: tmp.display().to_string(), source })
 }
 
 /// Adds channel `c` (and its schema) with its metadata: units, frames, log-time convention.

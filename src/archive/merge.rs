@@ -86,24 +86,32 @@ pub fn merge(
 
 /// Warnings for shards of an `I/N` set that no summary covers, and for mixed shard counts.
 fn missing_shards(reports: &[(String, ConvertSummary)]) -> Vec<String> {
-    let shards: Vec<(usize, usize)> = reports
-        .iter()
-        .filter_map(|(_, r)| r.shard.as_deref()?.parse::<super::shard::Shard>().ok())
-        .map(|s| (s.index, s.count))
-        .collect();
+    let mut warnings = Vec::new();
+    let mut shards: Vec<(usize, usize)> = Vec::new();
+    for (file, r) in reports {
+        let Some(text) = r.shard.as_deref() else { continue };
+        match text.parse::<super::shard::Shard>() {
+            Ok(s) => shards.push((s.index, s.count)),
+            Err(e) => warnings.push(format!("{file}: {e}")),
+        }
+    }
     let counts: BTreeSet<usize> = shards.iter().map(|s| s.1).collect();
     match counts.len() {
-        0 => vec![],
+        0 => {}
         1 => {
+            // `n` is at most MAX_SHARDS (the parse checks it).
             let n = *counts.first().expect("one count");
-            let missing: Vec<String> =
-                (0..n).filter(|i| !shards.iter().any(|s| s.0 == *i)).map(|i| format!("{i}/{n}")).collect();
-            if missing.is_empty() {
-                vec![]
-            } else {
-                vec![format!("no summary for shard(s) {}", missing.join(", "))]
+            let present: BTreeSet<usize> = shards.iter().map(|s| s.0).collect();
+            let missing: Vec<usize> = (0..n).filter(|i| !present.contains(i)).collect();
+            if !missing.is_empty() {
+                let mut list: Vec<String> = missing.iter().take(20).map(|i| format!("{i}/{n}")).collect();
+                if missing.len() > 20 {
+                    list.push(format!("and {} more", missing.len() - 20));
+                }
+                warnings.push(format!("no summary for shard(s) {}", list.join(", ")));
             }
         }
-        _ => vec![format!("summaries from runs cut into different numbers of shards: {counts:?}")],
+        _ => warnings.push(format!("summaries from runs cut into different numbers of shards: {counts:?}")),
     }
+    warnings
 }

@@ -60,13 +60,16 @@ impl Progress {
         }
     }
 
+    /// The counters now. The frame total is never below the frames done (a trial longer than its
+    /// header said, or one that failed after writing frames, would otherwise overshoot it).
     pub fn snapshot(&self) -> Snapshot {
+        let frames_done = self.frames_done.load(Relaxed);
         Snapshot {
             trials_total: self.trials_total.load(Relaxed),
             trials_done: self.trials_done.load(Relaxed),
             trials_failed: self.trials_failed.load(Relaxed),
-            frames_total: self.frames_total.load(Relaxed),
-            frames_done: self.frames_done.load(Relaxed),
+            frames_total: self.frames_total.load(Relaxed).max(frames_done),
+            frames_done,
         }
     }
 }
@@ -185,4 +188,22 @@ fn update_bars(trials: &ProgressBar, frames: &ProgressBar, s: &Snapshot, elapsed
     frames.set_length(s.frames_total.max(s.frames_done));
     frames.set_position(s.frames_done);
     frames.set_message(format!("{:.0} frames/s", s.frames_done as f64 / elapsed_s.max(1e-9)));
+}
+
+#[cfg(test)]
+mod overshoot_tests {
+    use super::*;
+
+    #[test]
+    fn frames_done_never_exceed_the_total_shown() {
+        let p = Progress::default();
+        p.plan([("a".to_string(), 200)]);
+        p.frames_done.fetch_add(361, Relaxed);
+        let s = p.snapshot();
+        assert!(s.frames_done <= s.frames_total, "{s:?}");
+        // A trial that failed after writing frames leaves the total, not the frames done.
+        p.finished("a", true, None);
+        let s = p.snapshot();
+        assert!(s.frames_done <= s.frames_total, "{s:?}");
+    }
 }

@@ -24,8 +24,13 @@ pub struct ChannelSpec {
 }
 
 /// `/smocap/state`: each frame's coordinates (and scale proxies).
-pub const STATE: ChannelSpec =
-    ChannelSpec { topic: "/smocap/state", schema: "smocap.State", descriptors: SMOCAP_DESCRIPTORS, frame: "", per_frame: true };
+pub const STATE: ChannelSpec = ChannelSpec {
+    topic: "/smocap/state",
+    schema: "smocap.State",
+    descriptors: SMOCAP_DESCRIPTORS,
+    frame: "",
+    per_frame: true,
+};
 /// `/smocap/stats`: each frame's solver statistics and marker RMSE.
 pub const STATS: ChannelSpec = ChannelSpec {
     topic: "/smocap/stats",

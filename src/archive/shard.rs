@@ -7,9 +7,15 @@ use super::discover::SubjectGroup;
 pub enum ShardError {
     #[error("shard '{0}': expected I/N with 0 ≤ I < N (e.g. 0/4)")]
     Syntax(String),
+    #[error("shard '{0}': at most {max} shards", max = MAX_SHARDS)]
+    TooMany(String),
     #[error("{var}={value}: expected a non-negative integer")]
     Env { var: &'static str, value: String },
 }
+
+/// Most shards a run may be cut into (`--shard I/N`, the job array's environment, and the
+/// summaries `merge-reports` joins).
+pub const MAX_SHARDS: usize = 100_000;
 
 /// Shard `index` of `count` (0-based).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -26,6 +32,9 @@ impl std::str::FromStr for Shard {
         let (index, count) = (i.trim().parse().map_err(|_| bad())?, n.trim().parse().map_err(|_| bad())?);
         if count == 0 || index >= count {
             return Err(bad());
+        }
+        if count > MAX_SHARDS {
+            return Err(ShardError::TooMany(s.into()));
         }
         Ok(Shard { index, count })
     }
@@ -66,7 +75,7 @@ pub fn assign(groups: &[SubjectGroup], count: usize) -> Vec<usize> {
         let (ga, gb) = (&groups[a], &groups[b]);
         gb.frames().cmp(&ga.frames()).then(ga.dataset.cmp(&gb.dataset)).then(ga.subject.cmp(&gb.subject))
     });
-    let mut load = vec![0u64; count.max(1)];
+    let mut load = vec![0u64; count.clamp(1, MAX_SHARDS)];
     let mut out = vec![0; groups.len()];
     for g in order {
         let s = (0..load.len()).min_by_key(|&s| (load[s], s)).unwrap_or(0);

@@ -26,6 +26,7 @@ fn cut(t: &MarkerTrial, a: usize, b: usize) -> MarkerTrial {
 /// Writes the dataset under `root` as `subjNN/static.trc` and `subjNN/walkNN.trc` (mm), unless
 /// `root/.complete` says it was written with the same spec.
 pub fn generate(spec: &SyntheticSpec, root: &Path) -> anyhow::Result<()> {
+    spec.validate().map_err(anyhow::Error::msg)?;
     let stamp = format!("{spec:?}");
     let marker = root.join(".complete");
     if std::fs::read_to_string(&marker).is_ok_and(|s| s == stamp) {

@@ -14,6 +14,7 @@ use crate::pipeline::convention::InputOptions;
 use crate::pipeline::stats::P50P90;
 use crate::pipeline::subject::read_trial;
 use crate::pipeline::trial::SinkError;
+use crate::pipeline::verdict::{Judge, Verdict};
 use crate::pipeline::{solve_trial_streaming, Context, SolvedFrame};
 use crate::solve::Calibration;
 use std::path::Path;
@@ -55,6 +56,9 @@ pub fn read_for(d: &Dataset, ctx: &Context, path: &Path, input: &InputOptions) -
     if let Some(r) = d.rate {
         t.set_rate(r);
     }
+    if let Some(w) = crate::pipeline::verdict::mask_implausible(&mut t) {
+        t.warnings.push(w);
+    }
     Ok(t)
 }
 
@@ -65,6 +69,9 @@ pub struct Solved {
     pub ms_per_frame: P50P90,
     pub iterations: P50P90,
     pub rmse_mm: Option<P50P90>,
+    /// Why the result is `suspect` ([`crate::pipeline::verdict`]); recorded in the file's
+    /// `smocap.run` metadata as `verdict` and `verdict_reason`.
+    pub suspect: Option<String>,
 }
 
 /// Solves `trial` and streams it to `out` (via its `.partial` file); `run` is the `smocap.run`
@@ -90,6 +97,7 @@ pub fn solve_and_write(
     let n = trial.n_frames();
     let (mut ms, mut it, mut rmse, mut secs) =
         (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n), 0.0);
+    let mut judge = Judge::default();
     let (solved, written) = std::thread::scope(|scope| {
         let (tx, rx) = std::sync::mpsc::sync_channel::<SolvedFrame>(QUEUE_FRAMES);
         let writing = std::thread::Builder::new()
@@ -109,6 +117,10 @@ pub fn solve_and_write(
             Err(e) => return (Err(e), None),
         };
         let mut sink = |f: SolvedFrame| -> Result<(), SinkError> {
+            judge.frame(f.index, &f.proxies, &f.stats, f.bridged);
+            if judge.nonfinite().is_some() {
+                return Err("the solver's result is not finite".into());
+            }
             secs += f.seconds;
             ms.push(f.seconds * 1e3);
             it.push(f.stats.iterations as f64);
@@ -127,13 +139,26 @@ pub fn solve_and_write(
         None => return Err(solved.err().unwrap_or_default()),
     };
     solved?;
-    writer.finish(run, &cal.settings_json, cal.scaled_model.as_deref()).map_err(|e| e.to_string())?;
+    let mut run = run.clone();
+    let verdict = judge.verdict();
+    match &verdict {
+        // Dropping the writer removes its temporary file.
+        Verdict::Failed(why) => return Err(why.clone()),
+        Verdict::Suspect(why) => {
+            run.insert("verdict".into(), "suspect".into());
+            run.insert("verdict_reason".into(), why.clone());
+        }
+        Verdict::Ok => {}
+    }
+    writer.finish(&run, &cal.settings_json, cal.scaled_model.as_deref()).map_err(|e| e.to_string())?;
     rmse.retain(|x: &f64| x.is_finite());
+    ms.retain(|x: &f64| x.is_finite());
     Ok(Solved {
         frames: ms.len(),
         solve_s: secs,
         ms_per_frame: P50P90::of(&ms),
         iterations: P50P90::of(&it),
         rmse_mm: (!rmse.is_empty()).then(|| P50P90::of(&rmse)),
+        suspect: verdict.reason(),
     })
 }

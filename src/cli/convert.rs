@@ -1,9 +1,9 @@
 //! `smocap convert`: whole archives described by `datasets.toml` to MCAP files.
 
 use crate::archive::config::read_datasets;
+use crate::archive::mcap_out::WriterOptions;
 use crate::archive::progress::{Display, Mode, Progress};
 use crate::archive::shard::Shard;
-use crate::archive::mcap_out::WriterOptions;
 use crate::archive::{convert, ConvertOptions};
 use anyhow::Context as _;
 use clap::Args;
@@ -55,6 +55,9 @@ pub struct ConvertArgs {
     /// the files of the same input are byte-identical across runs.
     #[arg(long)]
     pub timings: bool,
+    /// Exit 0 when no trial is found (by default a run that finds nothing to do exits 1).
+    #[arg(long)]
+    pub allow_empty: bool,
 }
 
 fn parse_epoch(s: &str) -> Result<u64, String> {
@@ -81,10 +84,16 @@ pub fn run(a: ConvertArgs) -> anyhow::Result<u8> {
             ..WriterOptions::default()
         },
     };
-    let every = Duration::try_from_secs_f64(a.progress_every).context("--progress-every: seconds expected")?;
+    let every = Duration::try_from_secs_f64(a.progress_every)
+        .ok()
+        .context("--progress-every: a non-negative number of seconds expected")?;
+    if let Some(j) = a.jobs {
+        anyhow::ensure!((1..=4096).contains(&j), "--jobs {j}: expected 1 to 4096 workers");
+    }
     let display = Display::start(progress, Mode::auto(a.quiet, every));
     let summary = convert(&datasets, &opt, &|line| display.println(line));
     display.finish();
+    let summary = summary?;
     print!("{}", summary.table());
     if let Some(p) = &a.report_json {
         std::fs::write(p, serde_json::to_string_pretty(&summary)?)
@@ -93,10 +102,20 @@ pub fn run(a: ConvertArgs) -> anyhow::Result<u8> {
     let failed = summary.failed();
     if failed > 0 {
         eprintln!("{failed} of {} trials failed:", summary.trials.len());
-        for t in summary.trials.iter().filter(|t| t.status == "failed") {
-            eprintln!("  {}/{}: {}", t.dataset, t.trial, t.error.as_deref().unwrap_or(""));
+        for t in summary.trials.iter().filter(|t| t.status == "failed" || t.status == "suspect") {
+            eprintln!("  {}/{}: {}: {}", t.dataset, t.trial, t.status, t.error.as_deref().unwrap_or(""));
         }
-        return Ok(super::EXIT_SOME_FAILED);
     }
-    Ok(0)
+    for d in summary.datasets.iter().filter(|d| d.failed.is_some()) {
+        eprintln!("dataset '{}' failed: {}", d.name, d.failed.as_deref().unwrap_or(""));
+    }
+    let (ok, bad) = (summary.succeeded(), failed + summary.failed_datasets());
+    if ok + bad == 0 {
+        eprintln!(
+            "{}: no trial found{}",
+            a.datasets.display(),
+            if a.allow_empty { "" } else { " (exit 1; --allow-empty to accept)" }
+        );
+    }
+    Ok(super::exit_code(ok, bad, a.allow_empty))
 }

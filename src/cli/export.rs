@@ -24,6 +24,13 @@ pub struct ExportArgs {
 }
 
 pub fn run(a: ExportArgs) -> anyhow::Result<u8> {
+    use anyhow::Context as _;
+    // The folders the outputs go to exist before the work starts.
+    for out in [&a.mot, &a.csv].into_iter().flatten() {
+        if let Some(d) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
+        }
+    }
     let rec = read_trial_record(&a.file)?;
     let model = match &a.model {
         Some(p) => Some(super::load_context(Some(p.as_path()), None)?.model),

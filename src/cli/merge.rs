@@ -39,11 +39,8 @@ pub fn run(a: MergeArgs) -> anyhow::Result<u8> {
     }
     let failed = s.failed();
     eprintln!("{} summaries, {} trials, {failed} failed", reports.len(), s.trials.len());
-    if failed > 0 {
-        for t in s.trials.iter().filter(|t| t.status == "failed") {
-            eprintln!("  {}/{}: {}", t.dataset, t.trial, t.error.as_deref().unwrap_or(""));
-        }
-        return Ok(super::EXIT_SOME_FAILED);
+    for t in s.trials.iter().filter(|t| t.status == "failed" || t.status == "suspect") {
+        eprintln!("  {}/{}: {}: {}", t.dataset, t.trial, t.status, t.error.as_deref().unwrap_or(""));
     }
-    Ok(0)
+    Ok(super::exit_code(s.succeeded(), failed + s.failed_datasets(), false))
 }

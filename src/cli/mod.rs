@@ -1,7 +1,10 @@
 //! The `smocap` command line.
 //!
-//! Exit codes: 0 all ok; 1 an error stopped the command (bad input, I/O); 2 usage error;
-//! 3 the command ran but some trials failed (see the report).
+//! Exit codes, the same for `solve`, `convert` and `merge-reports` ([`exit_code`]): 0 every
+//! trial ok (or, for `convert --resume`, already done); 3 some trials failed or are suspect (see
+//! the report) while others succeeded; 1 nothing could run: an error stopped the command (bad
+//! input, I/O, a dataset that could not be looked at), every trial failed, or no trial was found
+//! (unless `--allow-empty`); 2 usage error.
 
 mod audit;
 mod bench;
@@ -22,6 +25,20 @@ use std::process::ExitCode;
 
 /// Exit code when some trials failed but the run completed.
 pub const EXIT_SOME_FAILED: u8 = 3;
+/// Exit code when nothing could run (an error, no trial succeeded, or no trial at all).
+pub const EXIT_NOTHING_RAN: u8 = 1;
+
+/// The exit code of a run that found `succeeded + failed` trials (`failed` counts suspect ones
+/// and datasets that failed as a whole): 0 all succeeded, 3 some failed, 1 none succeeded; no
+/// trial at all is 1 unless `allow_empty`.
+pub fn exit_code(succeeded: usize, failed: usize, allow_empty: bool) -> u8 {
+    match (succeeded, failed) {
+        (0, 0) if allow_empty => 0,
+        (0, _) => EXIT_NOTHING_RAN,
+        (_, 0) => 0,
+        _ => EXIT_SOME_FAILED,
+    }
+}
 
 #[derive(Parser, Debug)]
 #[command(name = "smocap", version, about = "Joint scale–pose canonicalization of marker-based motion capture")]
@@ -84,13 +101,31 @@ pub fn main() -> ExitCode {
         Err(e) => {
             let top = e.to_string();
             eprintln!("error: {top}");
-            // Causes that the message already quotes are not repeated.
-            for cause in e.chain().skip(1).map(|c| c.to_string()).filter(|c| !top.contains(c.as_str())) {
+            for cause in new_causes(&e) {
                 eprintln!("  caused by: {cause}");
             }
             ExitCode::from(1)
         }
     }
+}
+
+/// The causes of `e` that its message (and the causes before them) do not already quote.
+fn new_causes(e: &anyhow::Error) -> Vec<String> {
+    let mut said = e.to_string();
+    let mut out = Vec::new();
+    for cause in e.chain().skip(1).map(|c| c.to_string()) {
+        if !said.contains(cause.as_str()) {
+            said += &cause;
+            out.push(cause);
+        }
+    }
+    out
+}
+
+/// `e` on one line: its message, then each cause it does not already quote (`a: b`), so that
+/// an I/O error is not said twice.
+pub(crate) fn one_line(e: &anyhow::Error) -> String {
+    std::iter::once(e.to_string()).chain(new_causes(e)).collect::<Vec<_>>().join(": ")
 }
 
 /// Loads the context named by `--model`/`--profile` (the shipped model by default).
@@ -124,7 +159,9 @@ pub struct BackendArgs {
     #[arg(long, value_enum, default_value_t = crate::pipeline::device::BackendChoice::Auto)]
     pub backend: crate::pipeline::device::BackendChoice,
     /// Lanes of the scheduler (segments in flight); default: the thread count on the CPU
-    /// backend, 4096 on wgpu. A trial is cut into at most this many segments of ≥ 100 frames.
+    /// backend, 4096 on wgpu. A trial of n frames is cut into max(1, n / 200) segments (each
+    /// walked from 20 frames before its start), whatever the lane and thread counts: they change
+    /// the speed, not the result.
     #[arg(long)]
     pub lanes: Option<usize>,
 }
@@ -140,6 +177,9 @@ impl BackendArgs {
         let chosen = choose(self.backend, &ctx.evaluator(), crate::kinematics::gpu::DEFAULT_CAP)?;
         if let Some(note) = chosen.note() {
             eprintln!("note: {note}");
+        }
+        if let Some(l) = self.lanes {
+            anyhow::ensure!((1..=1 << 20).contains(&l), "--lanes {l}: expected 1 to {}", 1 << 20);
         }
         let lanes = self.lanes.unwrap_or(match chosen {
             Chosen::Cpu { .. } => threads,
@@ -157,10 +197,15 @@ pub(crate) fn default_threads() -> usize {
 /// Output piped into a reader that stops early (`smocap markers F | head`) ends the process
 /// quietly, as other command-line tools do, instead of `println!` panicking on a broken pipe
 /// (Rust ignores SIGPIPE by default).
+///
+/// A file-size limit (`ulimit -f`) makes a write fail (EFBIG) instead of killing the process with
+/// SIGXFSZ, so that a writer cleans up its temporary file and the trial is reported failed.
 fn restore_sigpipe() {
     #[cfg(unix)]
-    // SAFETY: called first thing in main, before any thread exists; SIG_DFL is a valid handler.
+    // SAFETY: called first thing in main, before any thread exists; SIG_DFL and SIG_IGN are valid
+    // handlers.
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+        libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
     }
 }

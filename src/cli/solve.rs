@@ -3,6 +3,7 @@
 use crate::pipeline::report::{trial_report, Report};
 use crate::pipeline::solve_trial_with;
 use crate::pipeline::subject::{calibrate_placed_with, prepare_subject, Subject, SubjectFiles};
+use crate::pipeline::verdict::Verdict;
 use crate::solve::QpBackend;
 use crate::synth::Truth;
 use anyhow::Context as _;
@@ -98,8 +99,14 @@ fn read_trial(
     path: &std::path::Path,
     opt: &crate::pipeline::convention::InputOptions,
 ) -> anyhow::Result<(crate::io::MarkerTrial, crate::pipeline::convention::InputConventions)> {
-    let (t, conv) = crate::pipeline::subject::read_trial(ctx, path, opt)?;
+    let (mut t, conv) = crate::pipeline::subject::read_trial(ctx, path, opt)?;
     eprintln!("{}: {}", path.display(), conv.summary());
+    if let Some(w) = crate::pipeline::verdict::mask_implausible(&mut t) {
+        t.warnings.push(w);
+    }
+    for w in t.warnings.iter().filter(|w| w.contains("masked as gaps")) {
+        eprintln!("warning: {}: {w}", path.display());
+    }
     Ok((t, conv))
 }
 
@@ -137,7 +144,11 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         eprintln!("{n}");
     }
     let input_opt = crate::pipeline::convention::InputOptions { up: a.up, units: a.units };
+    if let Some(t) = a.threads {
+        anyhow::ensure!((1..=4096).contains(&t), "--threads {t}: expected 1 to 4096 threads");
+    }
     let threads = a.threads.unwrap_or_else(super::default_threads).max(1);
+    prepare_outputs(&a)?;
     anyhow::ensure!(
         a.truth.is_none() || a.trials.len() == 1,
         "--truth describes one trial, but {} trials were given",
@@ -164,7 +175,7 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         let name = p.display().to_string();
         match read_trial(&ctx, p, &input_opt) {
             Ok((t, conv)) => loaded.push((name, t, conv)),
-            Err(e) => report.push(Report::failed(&name, format!("{e:#}"))),
+            Err(e) => report.push(Report::failed(&name, super::one_line(&e))),
         }
     }
     // The subject's morphology from all its data: the static trial (when there is one) and
@@ -212,6 +223,11 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         };
         match result {
             Ok(r) => {
+                let verdict = judge(&r);
+                if let Verdict::Failed(why) = &verdict {
+                    report.push(Report::failed(name, format!("{name}: {why}")));
+                    continue;
+                }
                 for &f in &r.bridged {
                     eprintln!(
                         "{name}: frame {f} (file frame {}, t = {:.3} s) has fewer than {} observed markers; bridged from its neighbours",
@@ -225,9 +241,16 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
                 }
                 let mut tr = trial_report(&ctx, &r, truth.as_ref());
                 tr.input = Some(conv.clone());
+                // Suspect: the trial's frames (mostly at the iteration cap) or its subject's calibration.
+                let mut why: Vec<String> = verdict.reason().into_iter().collect();
                 if !suspect.is_empty() {
+                    why.push(format!("suspect calibration: {}", suspect.join("; ")));
+                }
+                if !why.is_empty() {
+                    let why = why.join("; ");
+                    eprintln!("warning: {name}: suspect: {why}");
                     tr.status = "suspect".into();
-                    tr.error = Some(format!("suspect calibration: {}", suspect.join("; ")));
+                    tr.error = Some(why);
                 }
                 report.push(tr);
                 solved.push((t, r));
@@ -243,16 +266,51 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
     export(&a, &ctx, &solved, calibration.as_ref().and_then(|c| c.as_ref().ok()))?;
     let failed = report.trials.iter().filter(|t| t.status != "ok").count();
     if failed > 0 {
-        eprintln!("{failed} of {} trials failed", report.trials.len());
+        eprintln!("{failed} of {} trials failed or are suspect", report.trials.len());
         if failed == report.trials.len() {
             anyhow::bail!(
                 "every trial failed: {}",
                 report.trials.iter().filter_map(|t| t.error.clone()).collect::<Vec<_>>().join("; ")
             );
         }
-        return Ok(super::EXIT_SOME_FAILED);
     }
-    Ok(0)
+    Ok(super::exit_code(report.trials.len() - failed, failed, false))
+}
+
+/// The verdict on a solved trial ([`crate::pipeline::verdict`]).
+fn judge(r: &crate::pipeline::TrialResult) -> Verdict {
+    let mut j = crate::pipeline::verdict::Judge::default();
+    for (f, (p, st)) in r.proxies.iter().zip(&r.stats).enumerate() {
+        j.frame(f, p, st, r.bridged.binary_search(&f).is_ok());
+    }
+    j.verdict()
+}
+
+/// Creates the folders the outputs go to, and finds `.mot` name clashes, before any work.
+fn prepare_outputs(a: &SolveArgs) -> anyhow::Result<()> {
+    let parent = |p: &std::path::Path| p.parent().filter(|d| !d.as_os_str().is_empty()).map(|d| d.to_path_buf());
+    let mut dirs: Vec<PathBuf> =
+        [a.report_json.as_deref(), a.scaled_model.as_deref()].into_iter().flatten().filter_map(parent).collect();
+    dirs.extend(a.mot_dir.clone());
+    for d in dirs {
+        std::fs::create_dir_all(&d).with_context(|| format!("creating {}", d.display()))?;
+    }
+    if let Some(dir) = &a.mot_dir {
+        let mut by_path: std::collections::BTreeMap<PathBuf, &std::path::Path> = std::collections::BTreeMap::new();
+        for t in &a.trials {
+            let path = dir.join(mot_name(&t.display().to_string()));
+            if let Some(other) = by_path.insert(path.clone(), t) {
+                anyhow::bail!("--mot-dir: {} and {} would both write {}", other.display(), t.display(), path.display());
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The `.mot` file name of a trial: its stem with `.mot`.
+fn mot_name(trial: &str) -> String {
+    let stem = std::path::Path::new(trial).file_stem().map_or("trial".into(), |s| s.to_string_lossy());
+    format!("{stem}.mot")
 }
 
 /// Writes the OpenSim outputs asked for: one `.mot` per solved trial, the scaled model.
@@ -267,8 +325,7 @@ fn export(
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         let mut written = std::collections::HashSet::new();
         for (trial, r) in solved {
-            let stem = std::path::Path::new(&r.name).file_stem().map_or("trial".into(), |s| s.to_string_lossy());
-            let path = dir.join(format!("{stem}.mot"));
+            let path = dir.join(mot_name(&r.name));
             anyhow::ensure!(written.insert(path.clone()), "--mot-dir: two trials would both write {}", path.display());
             write_mot(ctx, r, trial, &path)?;
             eprintln!("wrote {}", path.display());

@@ -30,13 +30,18 @@ pub const MARKER_FORMATS: &str = "trc, c3d";
 /// Reads a marker trial, choosing the reader by the file's extension (case-insensitive).
 pub fn read_markers(path: &Path) -> Result<MarkerTrial, MarkerFileError> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    match ext.as_str() {
-        "trc" => Ok(trc::read_trc(path)?),
-        "c3d" => Ok(c3d::read_c3d(path)?),
+    let mut t = match ext.as_str() {
+        "trc" => trc::read_trc(path)?,
+        "c3d" => c3d::read_c3d(path)?,
         _ => Err(MarkerFileError::Unsupported {
             path: path.display().to_string(),
             extension: ext,
             supported: MARKER_FORMATS,
-        }),
+        })?,
+    };
+    // Absurd values (whatever the units) are gaps before anything looks at the data.
+    if let Some(w) = crate::pipeline::verdict::mask_beyond(&mut t, crate::pipeline::verdict::ABSURD_COORDINATE_M) {
+        t.warnings.push(w);
     }
+    Ok(t)
 }

@@ -131,7 +131,9 @@ fn parse_frame(s: &str) -> Option<i64> {
 pub fn parse_trc(text: &str, name_for_errors: &str) -> Result<MarkerTrial, TrcError> {
     let file = name_for_errors.to_string();
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    let lines: Vec<&str> = text.lines().collect();
+    // Classic Mac line endings (CR only): each CR ends a line.
+    let lines: Vec<&str> =
+        if text.contains('\r') && !text.contains('\n') { text.split('\r').collect() } else { text.lines().collect() };
     let missing =
         |line: usize, expected: &str| TrcError::MissingHeader { file: file.clone(), line, expected: expected.into() };
     let mut warnings = Vec::new();

@@ -184,6 +184,32 @@ pub enum ModelError {
     MotionRange { joint: String, start: usize, end: usize },
     #[error("coordinate '{coordinate}' has an empty range [{lo}, {hi}]")]
     EmptyRange { coordinate: String, lo: f64, hi: f64 },
+    #[error("the model has {count} {what}; at most {max} are supported")]
+    TooLarge { what: &'static str, count: usize, max: usize },
+}
+
+/// Most bodies a model may have. The solver's per-frame matrices grow with the square of the
+/// proxy count and the root-to-body chains with bodies × depth, so a model far beyond any
+/// musculoskeletal or animal model (hundreds of bodies) is refused rather than run out of memory.
+pub const MAX_BODIES: usize = 1000;
+/// Most coordinates a model may have (six per body at [`MAX_BODIES`]).
+pub const MAX_COORDINATES: usize = 6 * MAX_BODIES;
+/// Most markers a model may have.
+pub const MAX_MARKERS: usize = 10_000;
+
+/// Refuses models beyond [`MAX_BODIES`], [`MAX_COORDINATES`] or [`MAX_MARKERS`].
+fn check_size(bodies: usize, motions: usize, coordinates: usize, markers: usize) -> Result<(), ModelError> {
+    for (what, count, max) in [
+        ("bodies", bodies, MAX_BODIES),
+        ("elementary joint motions", motions, MAX_COORDINATES),
+        ("coordinates", coordinates, MAX_COORDINATES),
+        ("markers", markers, MAX_MARKERS),
+    ] {
+        if count > max {
+            return Err(ModelError::TooLarge { what, count, max });
+        }
+    }
+    Ok(())
 }
 
 /// An immutable articulated model with its precomputed topology.
@@ -210,6 +236,7 @@ impl Model {
         markers: Vec<Marker>,
         couplings: Vec<CoordinateCoupling>,
     ) -> Result<Model, ModelError> {
+        check_size(bodies.len(), motions.len(), coordinates.len(), markers.len())?;
         check_unique("body", bodies.iter().map(|b| b.name.as_str()))?;
         check_unique("coordinate", coordinates.iter().map(|c| c.name.as_str()))?;
         check_unique("marker", markers.iter().map(|m| m.name.as_str()))?;
@@ -312,6 +339,7 @@ impl Model {
 
     /// Replaces the marker set (e.g. one read from a separate marker-set file).
     pub fn with_markers(mut self, markers: Vec<Marker>) -> Result<Model, ModelError> {
+        check_size(self.bodies.len(), self.motions.len(), self.coordinates.len(), markers.len())?;
         check_unique("marker", markers.iter().map(|m| m.name.as_str()))?;
         for m in &markers {
             check_index("marker", &m.name, "body", m.body, self.bodies.len())?;

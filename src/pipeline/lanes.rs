@@ -69,6 +69,8 @@ struct Lane<'e> {
     /// Current segment `[a, b)` and frame.
     seg: Option<(usize, usize)>,
     frame: usize,
+    /// First frame of the segment handed on (frames before it are its run-in).
+    emit_from: usize,
     p: Vec<f64>,
     prev: Option<Vec<f64>>,
     prev2: Option<Vec<f64>>,
@@ -90,6 +92,7 @@ impl<'e> Lane<'e> {
             solver: FrameSolver::new(eval, settings.clone(), make_qp(settings.qp)),
             seg: None,
             frame: 0,
+            emit_from: 0,
             p: vec![0.0; np],
             prev: None,
             prev2: None,
@@ -167,13 +170,19 @@ impl<'e> Lane<'e> {
 
 /// Solves the frames of `segments` (ranges of frame indices of one trial) with `lanes` lanes,
 /// evaluating through `backend`, handing each frame to `done` (with its index) as soon as it is
-/// solved: in frame order within a segment, segments interleaved when several lanes run. An error
-/// from `done` stops the run and is returned. Runs on the current rayon pool.
+/// solved: in frame order within a segment, segments interleaved when several lanes run. A
+/// segment `[a, b)` is walked from `a − run_in` (cold-started there, warm-started from then on)
+/// and its frames from `a` are handed on, so that its first frame continues a tracked motion as
+/// the previous segment's last one does. Each lane's result depends only on its segment, not on
+/// the lane count or on which lane walked it. An error from `done` stops the run and is
+/// returned. Runs on the current rayon pool.
+#[allow(clippy::too_many_arguments)]
 pub fn run_lanes<E: From<BackendError>>(
     eval: &Evaluator<'_>,
     settings: &SolverSettings,
     inp: &TrialInputs<'_>,
     segments: &[(usize, usize)],
+    run_in: usize,
     lanes: usize,
     backend: &mut dyn BatchBackend,
     done: &mut dyn FnMut(usize, FrameResult) -> Result<(), E>,
@@ -191,7 +200,9 @@ pub fn run_lanes<E: From<BackendError>>(
         for lane in lanes.iter_mut() {
             let Next::Done(stats) = lane.next else { continue };
             if lane.it.take().is_some() {
-                done(lane.frame, (lane.p.clone(), stats, lane.started.elapsed().as_secs_f64()))?;
+                if lane.frame >= lane.emit_from {
+                    done(lane.frame, (lane.p.clone(), stats, lane.started.elapsed().as_secs_f64()))?;
+                }
                 if stats.status != FrameStatus::TooFewMarkers {
                     let old = lane.prev2.take();
                     lane.prev2 = lane.prev.take();
@@ -206,7 +217,8 @@ pub fn run_lanes<E: From<BackendError>>(
                 lane.prev = None;
                 lane.prev2 = None;
                 if let Some((a, _)) = lane.seg {
-                    lane.frame = a;
+                    lane.frame = a.saturating_sub(run_in);
+                    lane.emit_from = a;
                 }
             }
         }

@@ -15,6 +15,7 @@ pub mod stats;
 pub mod stream;
 pub mod subject;
 pub mod trial;
+pub mod verdict;
 
 pub use context::{Context, ContextError};
 pub use stream::{solve_trial, solve_trial_streaming, solve_trial_with, SolvedFrame, StreamedTrial};

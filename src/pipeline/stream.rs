@@ -137,6 +137,21 @@ fn bridge(
     }
 }
 
+/// Frames per segment (at least; a trial of `n` frames has `max(1, n / SEGMENT_FRAMES)`
+/// segments of equal length ± 1). Segments are solved in parallel (one lane each at a time).
+pub const SEGMENT_FRAMES: usize = 200;
+/// Frames before a segment's first one that its lane solves first (cold-started at the first of
+/// them) and does not hand on, so that the segment starts warm, from a tracked pose, as the frame
+/// would in an uncut trial.
+pub const SEGMENT_RUN_IN: usize = 20;
+
+/// The segments of a trial of `n` frames: `[a, b)` ranges covering `0..n`, a function of `n`
+/// alone (see [`SEGMENT_FRAMES`]).
+pub fn segments(n: usize) -> Vec<(usize, usize)> {
+    let k = (n / SEGMENT_FRAMES).max(1);
+    (0..k).map(|i| (i * n / k, (i + 1) * n / k)).collect()
+}
+
 /// Solves every frame of `trial` like [`super::solve_trial_with`], handing each frame to `sink`
 /// in frame order as soon as it is known. An error from `sink` stops the solve
 /// ([`TrialError::Output`]).
@@ -163,6 +178,9 @@ pub fn solve_trial_streaming(
     if trial.n_frames() == 0 {
         return Err(TrialError::Empty { trial: name.into() });
     }
+    if super::verdict::solvable_frames(ctx, trial, map) == 0 {
+        return Err(TrialError::NothingSolvable { trial: name.into(), min: ctx.settings.min_markers });
+    }
     let obs = FrameObservations { trial, map };
     let settings = &ctx.settings;
     let eval = ctx.evaluator();
@@ -186,12 +204,12 @@ pub fn solve_trial_streaming(
             neutral[k] = calibration.proxies[k];
         }
     }
-    // Segments, one lane each at a time.
+    // Segments, one lane each at a time: fixed by the frame count alone, so that the result does
+    // not depend on the lane or thread count.
     let n = trial.n_frames();
     let threads = threads.max(1);
     let lanes = lanes.max(1);
-    let segments = lanes.min(n.div_ceil(100)).max(1);
-    let bounds: Vec<(usize, usize)> = (0..segments).map(|i| (i * n / segments, (i + 1) * n / segments)).collect();
+    let bounds = segments(n);
     let inputs = TrialInputs {
         observed: obs,
         marker_weights: &ctx.marker_weights,
@@ -232,10 +250,10 @@ pub fn solve_trial_streaming(
                 }
             };
             match backend {
-                Some(b) => run_lanes(&eval, settings, &inputs, &bounds, lanes, b, &mut done)?,
+                Some(b) => run_lanes(&eval, settings, &inputs, &bounds, SEGMENT_RUN_IN, lanes, b, &mut done)?,
                 None => {
                     let mut cpu = CpuBackend::new(eval.clone());
-                    run_lanes(&eval, settings, &inputs, &bounds, lanes, &mut cpu, &mut done)?
+                    run_lanes(&eval, settings, &inputs, &bounds, SEGMENT_RUN_IN, lanes, &mut cpu, &mut done)?
                 }
             }
         }
@@ -286,8 +304,8 @@ pub fn solve_trial(
 }
 
 /// Solves every frame of `trial` with the lane scheduler ([`super::lanes`]): the trial is cut
-/// into at most `lanes` segments of at least 100 frames, each cold-started and walked by one
-/// lane; evaluations go to `backend` (the CPU backend when `None`), the QPs to a pool of
+/// into [`segments`] of at least [`SEGMENT_FRAMES`] frames (whatever `lanes` and `threads`), each
+/// walked by one lane from [`SEGMENT_RUN_IN`] frames before its start; evaluations go to `backend` (the CPU backend when `None`), the QPs to a pool of
 /// `threads` threads. Collects what [`solve_trial_streaming`] hands on frame by frame.
 pub fn solve_trial_with(
     ctx: &Context,

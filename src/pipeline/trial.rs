@@ -25,6 +25,8 @@ pub enum TrialError {
     Matching { trial: String, source: MatchError },
     #[error("trial '{trial}' has no frames")]
     Empty { trial: String },
+    #[error("trial '{trial}': no frame has at least {min} observed markers with a weight above 0, nothing to solve")]
+    NothingSolvable { trial: String, min: usize },
     #[error("trial '{trial}': no frame has at least {min} observed markers, nothing to calibrate on")]
     NothingToCalibrate { trial: String, min: usize },
     #[error("trial '{trial}': evaluation backend failed: {source}")]

@@ -1,0 +1,181 @@
+//! Garbage in is not "ok" out: implausible marker positions are masked before solving, a trial
+//! with no solvable frame is refused before any work, and a solved trial is judged on its
+//! frames: a non-finite result fails it, most frames at the iteration cap make it `suspect`.
+
+use super::Context;
+use crate::io::MarkerTrial;
+use crate::solve::{FrameStats, FrameStatus};
+
+/// Marker coordinates farther than this from the origin of the data (m, after conversion to
+/// the model's units) are masked as gaps: no motion capture volume is a kilometre across, and
+/// such values (a `POINT:SCALE` of 3e38, a marker at 1e15 mm) only ruin the frames they are in.
+pub const MAX_COORDINATE_M: f64 = 1000.0;
+
+/// A trial is `suspect` when more than this fraction of its solved frames stopped at the
+/// iteration cap.
+pub const SUSPECT_CAP_FRACTION: f64 = 0.5;
+
+/// Coordinates beyond this (m, in the file's own declared units) are masked as the file is read,
+/// before units and up axis are looked at: implausible in any unit a lab file may really be in
+/// (a millimetre file declared as metres stays below 1e4).
+pub const ABSURD_COORDINATE_M: f64 = 1e6;
+
+/// Masks (sets to NaN, a gap) every marker sample with a coordinate that is not finite or is
+/// beyond [`MAX_COORDINATE_M`] (the trial in the model's units); returns a warning saying how
+/// many, or `None` when none were.
+pub fn mask_implausible(trial: &mut MarkerTrial) -> Option<String> {
+    mask_beyond(trial, MAX_COORDINATE_M)
+}
+
+/// As [`mask_implausible`] with the limit `limit_m`.
+pub fn mask_beyond(trial: &mut MarkerTrial, limit_m: f64) -> Option<String> {
+    let mut masked = 0usize;
+    let mut nonfinite = 0usize;
+    for p in trial.positions.chunks_exact_mut(3) {
+        if p.iter().all(|v| v.is_nan()) {
+            continue;
+        }
+        let bad_value = p.iter().any(|v| !v.is_finite());
+        if bad_value || p.iter().any(|v| v.abs() > limit_m) {
+            p.fill(f64::NAN);
+            masked += 1;
+            nonfinite += bad_value as usize;
+        }
+    }
+    (masked > 0).then(|| {
+        format!(
+            "{masked} marker samples masked as gaps: {nonfinite} not finite, {} beyond {limit_m} m",
+            masked - nonfinite
+        )
+    })
+}
+
+/// Frames of `trial` with at least `min_markers` markers observed that the solver uses
+/// (weight > 0); `map` is the trial column of each model marker.
+pub fn solvable_frames(ctx: &Context, trial: &MarkerTrial, map: &[Option<usize>]) -> usize {
+    let min = ctx.settings.min_markers;
+    (0..trial.n_frames())
+        .filter(|&f| {
+            let seen = map
+                .iter()
+                .zip(&ctx.marker_weights)
+                .filter(|(c, &w)| w > 0.0 && c.is_some_and(|c| trial.position(f, c).is_some()))
+                .count();
+            seen >= min.max(1)
+        })
+        .count()
+}
+
+/// What the frames of a solved trial say about it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Verdict {
+    Ok,
+    /// Solved, but not to be trusted: why.
+    Suspect(String),
+    /// Not a result: why.
+    Failed(String),
+}
+
+impl Verdict {
+    /// The report status: "ok", "suspect" or "failed".
+    pub fn status(&self) -> &'static str {
+        match self {
+            Verdict::Ok => "ok",
+            Verdict::Suspect(_) => "suspect",
+            Verdict::Failed(_) => "failed",
+        }
+    }
+
+    pub fn reason(&self) -> Option<String> {
+        match self {
+            Verdict::Ok => None,
+            Verdict::Suspect(w) | Verdict::Failed(w) => Some(w.clone()),
+        }
+    }
+}
+
+/// Running judgement of a trial's frames, fed in frame order.
+#[derive(Clone, Debug, Default)]
+pub struct Judge {
+    solved: usize,
+    at_cap: usize,
+    /// First frame with a non-finite proxy or energy/RMSE.
+    nonfinite: Option<usize>,
+}
+
+impl Judge {
+    /// Records frame `f` (`bridged` frames are not solved; their proxies are checked only).
+    pub fn frame(&mut self, f: usize, proxies: &[f64], stats: &FrameStats, bridged: bool) {
+        let finite = proxies.iter().all(|v| v.is_finite());
+        let solved = !bridged && stats.status != FrameStatus::TooFewMarkers;
+        if solved {
+            self.solved += 1;
+            self.at_cap += (stats.status == FrameStatus::MaxIterations) as usize;
+        }
+        if self.nonfinite.is_none() && (!finite || solved && !(stats.rmse_m.is_finite() && stats.energy.is_finite())) {
+            self.nonfinite = Some(f);
+        }
+    }
+
+    /// The first frame with a non-finite result, if any.
+    pub fn nonfinite(&self) -> Option<usize> {
+        self.nonfinite
+    }
+
+    pub fn verdict(&self) -> Verdict {
+        if let Some(f) = self.nonfinite {
+            return Verdict::Failed(format!("frame {f}: the solver's result is not finite"));
+        }
+        if self.solved == 0 {
+            return Verdict::Failed("no frame could be solved".into());
+        }
+        if self.at_cap as f64 > SUSPECT_CAP_FRACTION * self.solved as f64 {
+            return Verdict::Suspect(format!(
+                "{} of {} solved frames stopped at the iteration cap",
+                self.at_cap, self.solved
+            ));
+        }
+        Verdict::Ok
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stats(status: FrameStatus, rmse_m: f64) -> FrameStats {
+        FrameStats { iterations: 3, accepted: 3, energy: 1.0, rmse_m, markers_used: 10, status }
+    }
+
+    #[test]
+    fn most_frames_at_the_cap_are_suspect_and_a_nan_fails() {
+        let mut j = Judge::default();
+        j.frame(0, &[0.0], &stats(FrameStatus::MaxIterations, 0.01), false);
+        j.frame(1, &[0.0], &stats(FrameStatus::Converged, 0.01), false);
+        assert_eq!(j.verdict(), Verdict::Ok);
+        j.frame(2, &[0.0], &stats(FrameStatus::MaxIterations, 0.01), false);
+        assert_eq!(j.verdict().status(), "suspect");
+        j.frame(3, &[0.0], &stats(FrameStatus::Converged, f64::NAN), false);
+        assert_eq!(j.verdict().status(), "failed");
+        let mut j = Judge::default();
+        j.frame(0, &[0.0], &stats(FrameStatus::TooFewMarkers, f64::NAN), true);
+        assert_eq!(j.verdict(), Verdict::Failed("no frame could be solved".into()));
+    }
+
+    #[test]
+    fn far_and_non_finite_samples_are_masked_as_gaps() {
+        let mut t = MarkerTrial {
+            labels: vec!["a".into(), "b".into()],
+            rate_hz: 100.0,
+            times: vec![0.0],
+            frame_numbers: vec![1],
+            positions: vec![0.1, 0.2, 0.3, 1e12, 0.0, 0.0],
+            source_units: "m".into(),
+            warnings: vec![],
+        };
+        let w = mask_implausible(&mut t).unwrap();
+        assert!(w.contains("1 marker samples"), "{w}");
+        assert!(t.position(0, 0).is_some() && t.position(0, 1).is_none());
+        assert_eq!(mask_implausible(&mut t), None);
+    }
+}
