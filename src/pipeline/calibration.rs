@@ -56,6 +56,13 @@ struct Priors {
     stature_ratio: f64,
 }
 
+impl Priors {
+    /// Every term, the anthropometric one included, for the solver to sum.
+    fn all(&self) -> Vec<&dyn GlobalTerm> {
+        self.terms.iter().map(|t| t.as_ref()).chain(self.anthro.as_ref().map(|a| a as &dyn GlobalTerm)).collect()
+    }
+}
+
 /// The priors with their weights for marker noise `noise_m` (m) and `frames` calibration frames.
 fn priors(ctx: &Context, scale: &[usize], noise_m: f64, frames: usize) -> Result<Priors, TrialError> {
     let s = &ctx.settings;
@@ -283,8 +290,7 @@ pub fn calibrate_subject_with(
     let none = vec![false; nm];
     // Stage 1: scales and poses on the first-stage markers.
     let mut state = initial_state_weighted(&mut solver, &slices, &w_first, &template, &p0, &starts);
-    let terms: Vec<&dyn GlobalTerm> =
-        pri.terms.iter().map(|t| t.as_ref()).chain(pri.anthro.as_ref().map(|a| a as &dyn GlobalTerm)).collect();
+    let terms = pri.all();
     let stage1 = JointProblem {
         model: &ctx.model,
         proxy: &ctx.proxy,
@@ -307,8 +313,7 @@ pub fn calibrate_subject_with(
     let noise = out.rmse_m.clamp(0.0005, 0.03);
     let pri =
         priors(ctx, &scale, if out.rmse_m.is_finite() { noise } else { settings.prior_noise_sd_m }, slices.len())?;
-    let terms: Vec<&dyn GlobalTerm> =
-        pri.terms.iter().map(|t| t.as_ref()).chain(pri.anthro.as_ref().map(|a| a as &dyn GlobalTerm)).collect();
+    let terms = pri.all();
     let stage1 = JointProblem { terms: &terms, ..stage1 };
     if !registering {
         out = stage1.solve(&mut state);
