@@ -143,3 +143,17 @@ fn opensim_datasets_are_y_up_like_their_models() {
         }
     }
 }
+
+#[test]
+fn an_explicit_up_axis_that_contradicts_a_confident_detection_is_warned_about() {
+    let ctx = Context::shipped().unwrap();
+    let mut t = synthetic(&ctx);
+    rotate(&mut t, &z_to_y());
+    // The data are Y up; the user says Z.
+    let c = conform_trial(&ctx, &mut t.clone(), &InputOptions { up: Some(UpAxis::Z), units: None });
+    assert_eq!(c.up_source, "command line");
+    assert!(c.notes.iter().any(|n| n.contains("--up z contradicts") && n.contains("(y)")), "{:?}", c.notes);
+    // Saying what the data are draws no warning.
+    let c = conform_trial(&ctx, &mut t, &InputOptions { up: Some(UpAxis::Y), units: None });
+    assert!(c.notes.iter().all(|n| !n.contains("contradicts")), "{:?}", c.notes);
+}
