@@ -352,3 +352,70 @@ fn trials_are_solved_with_the_calibrated_morphology_in_every_frame() {
         }
     }
 }
+
+#[test]
+fn a_converted_files_state_and_scaled_model_reproduce_its_recorded_fit() {
+    let dir = shared("datasets/gait2354_subject01");
+    if !dir.exists() {
+        eprintln!("skipped: {} is absent", dir.display());
+        return;
+    }
+    let tmp = std::env::temp_dir().join(format!("smocap-calibration-mcap-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&tmp);
+    std::fs::create_dir_all(&tmp).unwrap();
+    let d = |f: &str| dir.join(f).display().to_string();
+    let toml = tmp.join("datasets.toml");
+    std::fs::write(
+        &toml,
+        format!(
+            "[[dataset]]\nname = \"g\"\nroot = \"{}\"\ntrials = [\"subject01_walk1.trc\"]\nstatic = \"subject01_static.trc\"\nmodel = \"{}\"\nmarkerset = \"{}\"\nscale_setup = \"{}\"\nik_setup = \"{}\"\n",
+            dir.display(),
+            d("gait2354_simbody.osim"),
+            d("gait2354_Scale_MarkerSet.xml"),
+            d("subject01_Setup_Scale.xml"),
+            d("subject01_Setup_IK.xml"),
+        ),
+    )
+    .unwrap();
+    let out = tmp.join("out");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_smocap"))
+        .args(["convert", toml.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rec = smocap::archive::export::read_trial_record(&out.join("g/subject01_walk1.mcap")).expect("reads");
+    let osim = tmp.join("scaled.osim");
+    std::fs::write(&osim, rec.scaled_model.as_ref().expect("scaled model attached")).unwrap();
+    let mut ctx = Context::from_files_with_markers(&osim, None, None).expect("scaled model reads");
+    ctx.apply_ik_setup(&smocap::io::osim::read_ik_setup(&dir.join("subject01_Setup_IK.xml")).unwrap()).unwrap();
+    let (trial, _) = read_trial(&ctx, &dir.join("subject01_walk1.trc"), &InputOptions::default()).unwrap();
+    let map = smocap::pipeline::trial::match_markers(&ctx, "t", &trial).unwrap().columns;
+    let mut ws = smocap::kinematics::cpu::Workspace::new(&ctx.model);
+    let p0 = ctx.proxy.default_proxies();
+    let (mut again, mut recorded, mut n) = (0.0, 0.0, 0);
+    for (f, fr) in rec.frames.iter().enumerate() {
+        let Some(r) = fr.rmse_m.filter(|v| v.is_finite()) else { continue };
+        let mut y = ctx.proxy.state(&p0);
+        for (i, c) in ctx.model.coordinates.iter().enumerate() {
+            y[i] = *fr.state.q.get(&c.name).unwrap_or_else(|| panic!("{} not in the state", c.name));
+        }
+        smocap::kinematics::cpu::forward(&ctx.model, &y, &mut ws);
+        let (mut sq, mut used) = (0.0, 0);
+        for (m, col) in map.iter().enumerate() {
+            let Some(p) = col.and_then(|c| trial.position(f, c)) else { continue };
+            if ctx.marker_weights[m] > 0.0 {
+                sq += (0..3).map(|a| (ws.markers[3 * m + a] - p[a]).powi(2)).sum::<f64>();
+                used += 1;
+            }
+        }
+        again += (sq / used as f64).sqrt();
+        recorded += r;
+        n += 1;
+    }
+    let (again, recorded) = (again / n as f64 * 1e3, recorded / n as f64 * 1e3);
+    eprintln!(
+        "converted gait2354: recorded {recorded:.3} mm, recomputed from the state and the attached model {again:.3} mm"
+    );
+    assert!((again - recorded).abs() <= 0.1, "{again} vs {recorded}");
+    let _ = std::fs::remove_dir_all(&tmp);
+}
