@@ -349,11 +349,14 @@ fn the_same_trial_solved_on_wgpu_and_cpu_agrees_to_a_hundredth_of_a_millimetre_a
     use smocap::model::CoordinateKind;
     use smocap::pipeline::{calibrate_subject, solve_trial_with};
     use smocap::synth::{synthesize, SynthOptions};
-    let ctx = Context::shipped().unwrap();
+    let generic = Context::shipped().unwrap();
+    let s =
+        synthesize(&generic.model, &generic.proxy, &SynthOptions { frames: 200, seed: 3, ..SynthOptions::default() });
+    let cal = calibrate_subject(&generic, &[("t", &s.trial)]).unwrap();
+    // The backend holds the model: built once calibration registered the markers (as `solve` does).
+    let ctx = generic.pinned_to(&cal);
     let eval = ctx.evaluator();
     let Some(mut gpu) = gpu(&eval, 1024) else { return };
-    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 200, seed: 3, ..SynthOptions::default() });
-    let cal = calibrate_subject(&ctx, &[("t", &s.trial)]).unwrap();
     let a = solve_trial_with(&ctx, "t", &s.trial, &cal, 2, 2, None).unwrap();
     let b = solve_trial_with(&ctx, "t", &s.trial, &cal, 2, 2, Some(&mut gpu)).unwrap();
     let map = smocap::pipeline::trial::match_markers(&ctx, "synthetic", &s.trial).unwrap().columns;
