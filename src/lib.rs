@@ -14,5 +14,6 @@ pub mod io;
 pub mod kinematics;
 pub mod model;
 pub mod pipeline;
+pub mod render;
 pub mod solve;
 pub mod synth;

@@ -59,6 +59,15 @@ pub struct TrialRecord {
     pub scaled_model: Option<String>,
     /// Where the converted model came from (`smocap.run` → `model`).
     pub model_source: Option<String>,
+    /// Model marker names in `/smocap/subject` order: the order of the points of `/markers`
+    /// (empty for files of the JSON encoding).
+    pub marker_names: Vec<String>,
+    /// The rotation from the model's frame to the Z-up `world` as `[x, y, z, w]`
+    /// (`/smocap/subject`'s `world_from_model`), when recorded.
+    pub world_from_model: Option<[f64; 4]>,
+    /// Observed markers per frame index (`/markers`): x y z (m, model frame) per marker in
+    /// [`Self::marker_names`] order, NaN where not observed.
+    pub observed: BTreeMap<usize, Vec<f32>>,
 }
 
 /// Reads the frames of `path` (a file written by `smocap convert`: protobuf channels, or the
@@ -109,6 +118,7 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
     let mut status = BTreeMap::new();
     let mut subject: Option<proto::Subject> = None;
     let mut raw_states: Vec<proto::State> = Vec::new();
+    let mut observed = BTreeMap::new();
     #[derive(Deserialize)]
     struct Tagged {
         frame: usize,
@@ -124,6 +134,10 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
             match topic {
                 "/smocap/subject" => subject = Some(proto::Subject::decode(data).map_err(|e| what(&e))?),
                 "/smocap/state" => raw_states.push(proto::State::decode(data).map_err(|e| what(&e))?),
+                "/markers" => {
+                    let c = proto::PointCloud::decode(data).map_err(|e| what(&e))?;
+                    observed.insert(msg.sequence as usize, cloud_xyz(&c).map_err(|e| what(&e))?);
+                }
                 "/smocap/stats" => {
                     let s = proto::SolverStats::decode(data).map_err(|e| what(&e))?;
                     let f = s.frame as usize;
@@ -150,6 +164,13 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
             _ => {}
         }
     }
+    let (mut marker_names, mut world_from_model) = (Vec::new(), None);
+    if let Some(sub) = &subject {
+        marker_names = sub.markers.clone();
+        if let [x, y, z, w] = sub.world_from_model[..] {
+            world_from_model = Some([x, y, z, w]);
+        }
+    }
     if !raw_states.is_empty() {
         let sub = subject.ok_or_else(|| bad("/smocap/state without a /smocap/subject message".into()))?;
         for s in raw_states {
@@ -164,7 +185,16 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
         .into_iter()
         .map(|(f, state)| Frame { state, rmse_m: rmse.get(&f).copied().flatten(), status: status.remove(&f).flatten() })
         .collect();
-    Ok(TrialRecord { frames, time_offset, scaled_model, model_source })
+    Ok(TrialRecord { frames, time_offset, scaled_model, model_source, marker_names, world_from_model, observed })
+}
+
+/// The points of a `/markers` cloud as float32 x y z triples (the layout `smocap convert`
+/// writes: fields x, y, z as FLOAT32 at offsets 0, 4, 8, stride 12).
+fn cloud_xyz(c: &proto::PointCloud) -> Result<Vec<f32>, String> {
+    if c.point_stride != 12 || c.data.len() % 12 != 0 {
+        return Err(format!("point stride {} and {} bytes: expected packed float32 x y z", c.point_stride, c.data.len()));
+    }
+    Ok(c.data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect())
 }
 
 /// A protobuf state with its arrays named after `sub`: coordinates by name, each body's scale
