@@ -17,6 +17,8 @@ mod export;
 mod inspect;
 mod markers;
 mod merge;
+mod preview;
+mod project;
 mod solve;
 mod synth;
 
@@ -69,8 +71,12 @@ pub enum Command {
     Inspect(inspect::InspectArgs),
     /// Join the summaries (`--report-json`) of sharded convert runs into one; exit 3 if any trial failed.
     MergeReports(merge::MergeArgs),
-    /// A converted MCAP file's state channel as an OpenSim motion (`--mot`) and/or a CSV table (`--csv`).
+    /// A converted MCAP file's state channel as an OpenSim motion (`--mot`), a CSV table (`--csv`) and/or a glTF scene (`--gltf`).
     Export(export::ExportArgs),
+    /// 2D/3D ground truth of converted trials from a camera rig: COCO keypoint JSON, CSV, camera matrices, marker metrics.
+    Project(project::ProjectArgs),
+    /// A contact sheet (PNG) of a converted trial's projected skeleton and markers, one panel per camera.
+    Preview(preview::PreviewArgs),
     /// Spine ablation on the shipped model: poly vs nopoly vs classical on a synthetic yoga-like trial.
     EvalSpine(eval_spine::EvalSpineArgs),
     /// Pre-solve on the hard synthetic set: outlier rate and overhead with never/auto/always.
@@ -93,6 +99,8 @@ pub fn main() -> ExitCode {
         Command::Inspect(a) => inspect::run(a),
         Command::MergeReports(a) => merge::run(a),
         Command::Export(a) => export::run(a),
+        Command::Project(a) => project::run(a),
+        Command::Preview(a) => preview::run(a),
         Command::EvalSpine(a) => eval_spine::run_cli(a),
         Command::EvalPresolve(a) => eval_presolve::run(a),
     };

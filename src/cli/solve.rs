@@ -84,6 +84,17 @@ pub struct SolveArgs {
     /// rescaled, or the model generated), and its scale set beside it (`.scaleset.xml`).
     #[arg(long)]
     pub scaled_model: Option<PathBuf>,
+    /// Write each solved trial as a glTF 2.0 binary `<trial stem>.glb` into this directory:
+    /// the subject's bodies as nodes, its motion as an animation, bones, markers, observed
+    /// markers and cameras (as `smocap export --gltf`).
+    #[arg(long)]
+    pub gltf_dir: Option<PathBuf>,
+    /// Up axis of the glTF scenes (`y`: glTF's convention; `z`: the Z-up world).
+    #[arg(long, value_enum, default_value_t = crate::render::scene::Up::Y)]
+    pub gltf_up: crate::render::scene::Up,
+    /// Camera rig (TOML) of the glTF scenes; default: the built-in two-camera rig per trial.
+    #[arg(long)]
+    pub gltf_cameras: Option<PathBuf>,
     /// Pre-solve (root placement + root-to-leaf local fits before the trust-region QP): `never`;
     /// `auto` re-solves frames whose RMSE is an outlier of their trial (median + 6 MAD); `always`
     /// pre-solves every warm-started frame. Overrides the profile's `presolve` (default `auto`).
@@ -292,25 +303,27 @@ fn prepare_outputs(a: &SolveArgs) -> anyhow::Result<()> {
     let mut dirs: Vec<PathBuf> =
         [a.report_json.as_deref(), a.scaled_model.as_deref()].into_iter().flatten().filter_map(parent).collect();
     dirs.extend(a.mot_dir.clone());
+    dirs.extend(a.gltf_dir.clone());
     for d in dirs {
         std::fs::create_dir_all(&d).with_context(|| format!("creating {}", d.display()))?;
     }
-    if let Some(dir) = &a.mot_dir {
+    for (flag, dir, ext) in [("--mot-dir", &a.mot_dir, "mot"), ("--gltf-dir", &a.gltf_dir, "glb")] {
+        let Some(dir) = dir else { continue };
         let mut by_path: std::collections::BTreeMap<PathBuf, &std::path::Path> = std::collections::BTreeMap::new();
         for t in &a.trials {
-            let path = dir.join(mot_name(&t.display().to_string()));
+            let path = dir.join(out_name(&t.display().to_string(), ext));
             if let Some(other) = by_path.insert(path.clone(), t) {
-                anyhow::bail!("--mot-dir: {} and {} would both write {}", other.display(), t.display(), path.display());
+                anyhow::bail!("{flag}: {} and {} would both write {}", other.display(), t.display(), path.display());
             }
         }
     }
     Ok(())
 }
 
-/// The `.mot` file name of a trial: its stem with `.mot`.
-fn mot_name(trial: &str) -> String {
+/// The output file name of a trial: its stem with extension `ext` (`mot`, `glb`).
+fn out_name(trial: &str, ext: &str) -> String {
     let stem = std::path::Path::new(trial).file_stem().map_or("trial".into(), |s| s.to_string_lossy());
-    format!("{stem}.mot")
+    format!("{stem}.{ext}")
 }
 
 /// Writes the OpenSim outputs asked for: one `.mot` per solved trial, the scaled model.
@@ -325,9 +338,21 @@ fn export(
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         let mut written = std::collections::HashSet::new();
         for (trial, r) in solved {
-            let path = dir.join(mot_name(&r.name));
+            let path = dir.join(out_name(&r.name, "mot"));
             anyhow::ensure!(written.insert(path.clone()), "--mot-dir: two trials would both write {}", path.display());
             write_mot(ctx, r, trial, &path)?;
+            eprintln!("wrote {}", path.display());
+        }
+    }
+    if let Some(dir) = &a.gltf_dir {
+        let mut written = std::collections::HashSet::new();
+        for (trial, r) in solved {
+            let path = dir.join(out_name(&r.name, "glb"));
+            anyhow::ensure!(written.insert(path.clone()), "--gltf-dir: two trials would both write {}", path.display());
+            let take = crate::render::Take::from_solve(ctx, r, trial)?;
+            let cams = crate::render::cameras(&take, a.gltf_cameras.as_deref(), 0)?;
+            std::fs::write(&path, crate::render::scene::glb(&take, &cams, a.gltf_up)?)
+                .with_context(|| format!("writing {}", path.display()))?;
             eprintln!("wrote {}", path.display());
         }
     }

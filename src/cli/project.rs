@@ -1,0 +1,73 @@
+//! `smocap project`: 2D/3D ground truth of converted trials seen from a camera rig (COCO
+//! keypoint JSON and CSV per camera and frame, the cameras' OpenCV matrices) and the thesis'
+//! marker metrics; or, with `--points`, named world points projected (for checks against OpenCV).
+
+use crate::render::{self, project};
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct ProjectArgs {
+    /// MCAP files written by `smocap convert` (one output folder each: `--out` itself for one
+    /// file, `--out/<file stem>` for several).
+    #[arg(required_unless_present = "points")]
+    pub files: Vec<PathBuf>,
+    /// Camera rig (TOML, see `smocap project --help` in the README); default: the built-in
+    /// two-camera rig (frontal and sagittal) around each trial.
+    #[arg(long)]
+    pub cameras: Option<PathBuf>,
+    /// Seed of the default rig's perturbation of camera positions.
+    #[arg(long, default_value_t = 0)]
+    pub rig_seed: u64,
+    /// Project every N-th frame (from the first).
+    #[arg(long, default_value_t = 1)]
+    pub stride: usize,
+    /// Output folder.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Instead of trials: project the points of this CSV (`name,x,y,z`, m, world; a header row)
+    /// with `--cameras` (world coordinates); writes `cameras.json` and `points.csv`.
+    #[arg(long, conflicts_with = "files", requires = "cameras")]
+    pub points: Option<PathBuf>,
+    /// Also write the metrics of every trial as one JSON array here.
+    #[arg(long)]
+    pub report_json: Option<PathBuf>,
+}
+
+pub fn run(a: ProjectArgs) -> anyhow::Result<u8> {
+    use anyhow::Context as _;
+    anyhow::ensure!(a.stride >= 1, "--stride {}: expected at least 1", a.stride);
+    if let Some(points) = &a.points {
+        let cams = render::rig::read_rig(a.cameras.as_deref().expect("clap requires --cameras"), &render::SubjectFrame::world())?;
+        let pts = project::read_points(points)?;
+        project::write_points(&pts, &cams, &a.out)?;
+        eprintln!("wrote {} ({} points × {} cameras)", a.out.join("points.csv").display(), pts.len(), cams.len());
+        return Ok(0);
+    }
+    let mut dirs = std::collections::BTreeMap::new();
+    for f in &a.files {
+        let dir = if a.files.len() == 1 {
+            a.out.clone()
+        } else {
+            a.out.join(f.file_stem().map_or("trial".into(), |s| s.to_string_lossy().into_owned()))
+        };
+        if let Some(other) = dirs.insert(dir.clone(), f) {
+            anyhow::bail!("{} and {} would both write into {}", other.display(), f.display(), dir.display());
+        }
+    }
+    let mut rows = Vec::new();
+    for (dir, f) in &dirs {
+        let rec = crate::archive::export::read_trial_record(f)?;
+        let take = render::Take::from_record(&rec, f)?;
+        let cams = render::cameras(&take, a.cameras.as_deref(), a.rig_seed)?;
+        let m = project::write_ground_truth(&take, &cams, &take.strided(a.stride), dir)?;
+        eprintln!("wrote {} ({} frames × {} cameras)", dir.display(), m.frames, cams.len());
+        rows.push(m);
+    }
+    rows.sort_by(|x, y| x.trial.cmp(&y.trial));
+    print!("{}", project::metrics_table(&rows));
+    if let Some(p) = &a.report_json {
+        std::fs::write(p, serde_json::to_string_pretty(&rows)? + "\n").with_context(|| format!("writing {}", p.display()))?;
+    }
+    Ok(0)
+}
