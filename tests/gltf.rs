@@ -1,0 +1,214 @@
+//! glTF export (`smocap export --gltf`, [`smocap::render::scene`]): re-read with the `gltf`
+//! crate, the node tree evaluated at sampled frames (rest transforms overridden by the animation's
+//! keys) puts every body origin and model marker where smocap's forward kinematics does, within
+//! 1e-6 m, for both up axes, on the shipped model and the shared gait2354 and Rajagopal trials;
+//! nodes are named after the model's bodies and markers; the cameras are in the file; the bytes
+//! are the same on every run.
+
+mod common;
+
+use nalgebra::{Matrix4, Quaternion, Translation3, UnitQuaternion, Vector3};
+use smocap::render::scene::Up;
+use smocap::render::{self, Take};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("smocap-gltf-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Converts the datasets of `toml_body` into `dir/out` and returns the trial file `rel` there.
+fn convert(dir: &Path, toml_body: &str, rel: &str) -> PathBuf {
+    std::fs::create_dir_all(dir).unwrap();
+    let toml = dir.join("datasets.toml");
+    std::fs::write(&toml, toml_body).unwrap();
+    let out = dir.join("out");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_smocap"))
+        .args(["convert", toml.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    out.join(rel)
+}
+
+/// A converted synthetic trial of the shipped model.
+fn synthetic(dir: &Path, frames: usize) -> PathBuf {
+    let spec = smocap::archive::config::SyntheticSpec { subjects: 1, trials: 1, frames, seed: 5 };
+    smocap::archive::synthetic::generate(&spec, &dir.join("data")).unwrap();
+    convert(
+        dir,
+        "[[dataset]]\nname = \"lab\"\nroot = \"data\"\ntrials = [\"*/walk*.trc\"]\nsubject = \"{subject}/{trial}.trc\"\nstatic = \"{subject}/static.trc\"\n",
+        "lab/subj01/walk01.mcap",
+    )
+}
+
+/// A converted shared OpenSim trial (`datasets/<name>` with its model, marker set and setups),
+/// or `None` when the shared data are absent.
+fn shared_trial(dir: &Path, name: &str, files: [&str; 6]) -> Option<PathBuf> {
+    let root = common::shared(&format!("datasets/{name}"));
+    if !root.exists() {
+        eprintln!("skipped: {} is absent", root.display());
+        return None;
+    }
+    let [trial, stat, model, markerset, scale, ik] = files;
+    let d = |f: &str| root.join(f).display().to_string();
+    let toml = format!(
+        "[[dataset]]\nname = \"d\"\nroot = \"{}\"\ntrials = [\"{trial}\"]\nstatic = \"{stat}\"\nmodel = \"{}\"\nmarkerset = \"{}\"\nscale_setup = \"{}\"\nik_setup = \"{}\"\n",
+        root.display(),
+        d(model),
+        d(markerset),
+        d(scale),
+        d(ik)
+    );
+    Some(convert(dir, &toml, &format!("d/{}", trial.replace(".trc", ".mcap"))))
+}
+
+/// World transforms (4×4, f64) of every node at animation key `key`, and the nodes' names.
+fn world_at_key(doc: &gltf::Gltf, key: usize) -> (Vec<Matrix4<f64>>, Vec<String>) {
+    let blob = doc.blob.as_deref().unwrap();
+    let n = doc.document.nodes().count();
+    let mut trs: Vec<([f32; 3], [f32; 4], [f32; 3])> = doc.document.nodes().map(|nd| nd.transform().decomposed()).collect();
+    for anim in doc.document.animations() {
+        for ch in anim.channels() {
+            let r = ch.reader(|_| Some(blob));
+            let i = ch.target().node().index();
+            match r.read_outputs().unwrap() {
+                gltf::animation::util::ReadOutputs::Translations(mut t) => trs[i].0 = t.nth(key).unwrap(),
+                gltf::animation::util::ReadOutputs::Rotations(q) => trs[i].1 = q.into_f32().nth(key).unwrap(),
+                gltf::animation::util::ReadOutputs::Scales(mut s) => trs[i].2 = s.nth(key).unwrap(),
+                _ => panic!("unexpected animation path"),
+            }
+        }
+    }
+    let mut parent = vec![None; n];
+    for nd in doc.document.nodes() {
+        for c in nd.children() {
+            parent[c.index()] = Some(nd.index());
+        }
+    }
+    let local = |i: usize| {
+        let (t, q, s) = trs[i];
+        let t = Translation3::new(t[0] as f64, t[1] as f64, t[2] as f64).to_homogeneous();
+        let q = UnitQuaternion::from_quaternion(Quaternion::new(q[3] as f64, q[0] as f64, q[1] as f64, q[2] as f64));
+        t * q.to_homogeneous() * Matrix4::new_nonuniform_scaling(&Vector3::new(s[0] as f64, s[1] as f64, s[2] as f64))
+    };
+    let mut world: Vec<Option<Matrix4<f64>>> = vec![None; n];
+    fn eval(i: usize, parent: &[Option<usize>], local: &dyn Fn(usize) -> Matrix4<f64>, w: &mut Vec<Option<Matrix4<f64>>>) -> Matrix4<f64> {
+        if let Some(m) = w[i] {
+            return m;
+        }
+        let m = match parent[i] {
+            Some(p) => eval(p, parent, local, w) * local(i),
+            None => local(i),
+        };
+        w[i] = Some(m);
+        m
+    }
+    let names = doc.document.nodes().map(|nd| nd.name().unwrap_or("").to_string()).collect();
+    ((0..n).map(|i| eval(i, &parent, &local, &mut world)).collect(), names)
+}
+
+/// The largest distance (m) between the glTF's body origins and model markers and smocap's
+/// forward kinematics, over frames sampled through the trial.
+fn max_gltf_fk_error(take: &Take, up: Up) -> f64 {
+    let cams = render::cameras(take, None, 0).unwrap();
+    let doc = gltf::Gltf::from_slice(&render::scene::glb(take, &cams, up).unwrap()).expect("a valid glb");
+    let scene_from_world = up.scene_from_world();
+    let mut ws = smocap::kinematics::Workspace::new(&take.model);
+    let mut worst: f64 = 0.0;
+    let step = (take.len() / 7).max(1);
+    for key in (0..take.len()).step_by(step).chain([take.len() - 1]) {
+        let (world, names) = world_at_key(&doc, key);
+        let by_name: BTreeMap<&str, usize> = names.iter().enumerate().map(|(i, n)| (n.as_str(), i)).collect();
+        let pose = take.pose(key, &mut ws);
+        let origin = |name: &str| {
+            let m = world[*by_name.get(name).unwrap_or_else(|| panic!("no node named {name}"))];
+            Vector3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)])
+        };
+        for (b, body) in take.model.bodies.iter().enumerate() {
+            worst = worst.max((origin(&body.name) - scene_from_world * pose.body_pos[b]).norm());
+        }
+        for (m, mk) in take.model.markers.iter().enumerate() {
+            worst = worst.max((origin(&mk.name) - scene_from_world * pose.markers[m]).norm());
+        }
+    }
+    worst
+}
+
+fn check(file: &Path, what: &str) {
+    let rec = smocap::archive::export::read_trial_record(file).unwrap();
+    let take = Take::from_record(&rec, file).unwrap();
+    for up in [Up::Y, Up::Z] {
+        let e = max_gltf_fk_error(&take, up);
+        eprintln!("{what}, up {up:?}: glTF node world transforms vs forward kinematics: max {e:.2e} m");
+        assert!(e <= 1e-6, "{what} up {up:?}: {e} m");
+    }
+}
+
+#[test]
+fn gltf_node_world_transforms_reproduce_forward_kinematics_of_the_shipped_model() {
+    let dir = tmp("shipped");
+    check(&synthetic(&dir, 60), "shipped model");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn gltf_node_world_transforms_reproduce_forward_kinematics_of_the_shared_trials() {
+    let dir = tmp("shared");
+    let gait = [
+        "subject01_walk1.trc",
+        "subject01_static.trc",
+        "gait2354_simbody.osim",
+        "gait2354_Scale_MarkerSet.xml",
+        "subject01_Setup_Scale.xml",
+        "subject01_Setup_IK.xml",
+    ];
+    if let Some(f) = shared_trial(&dir.join("gait"), "gait2354_subject01", gait) {
+        check(&f, "gait2354");
+    }
+    let raj = [
+        "motion_capture_walk.trc",
+        "static_walk_1.trc",
+        "Rajagopal2016.osim",
+        "markerset_walk_preScale.xml",
+        "scale_setup_walk_scaleOnly.xml",
+        "ik_setup_walk.xml",
+    ];
+    if let Some(f) = shared_trial(&dir.join("raj"), "rajagopal2016_walk", raj) {
+        check(&f, "Rajagopal");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn gltf_export_names_bodies_markers_and_cameras_and_is_byte_identical_across_runs() {
+    let dir = tmp("names");
+    let file = synthetic(&dir, 30);
+    let out = |n: &str| dir.join(n).to_str().unwrap().to_string();
+    for name in ["a.glb", "b.glb"] {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_smocap"))
+            .args(["export", file.to_str().unwrap(), "--gltf", &out(name)])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let (a, b) = (std::fs::read(out("a.glb")).unwrap(), std::fs::read(out("b.glb")).unwrap());
+    assert_eq!(a, b, "two exports of one file differ");
+    let doc = gltf::Gltf::from_slice(&a).unwrap();
+    let names: Vec<String> = doc.document.nodes().map(|n| n.name().unwrap().to_string()).collect();
+    let rec = smocap::archive::export::read_trial_record(&file).unwrap();
+    let take = Take::from_record(&rec, &file).unwrap();
+    for n in take.model.bodies.iter().map(|b| &b.name).chain(take.model.markers.iter().map(|m| &m.name)) {
+        assert_eq!(names.iter().filter(|x| *x == n).count(), 1, "node {n}");
+        assert!(names.contains(&format!("observed/{n}")) || take.model.bodies.iter().any(|b| &b.name == n));
+    }
+    let cams: Vec<String> = doc.document.cameras().map(|c| c.name().unwrap().to_string()).collect();
+    assert_eq!(cams, ["frontal", "sagittal"]);
+    let anim = doc.document.animations().next().expect("one animation");
+    let input = anim.samplers().next().unwrap().input();
+    assert_eq!(input.count(), take.len(), "one key per frame");
+    let _ = std::fs::remove_dir_all(&dir);
+}
