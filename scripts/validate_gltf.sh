@@ -17,7 +17,10 @@ fi
 VDIR=${GLTF_VALIDATOR_DIR:-${XDG_CACHE_HOME:-$HOME/.cache}/smocap-gltf-validator}
 if [ ! -d "$VDIR/node_modules/gltf-validator" ]; then
     mkdir -p "$VDIR"
-    npm install --prefix "$VDIR" --no-audit --no-fund --silent gltf-validator@2.0.0-dev.3.10
+    if ! npm install --prefix "$VDIR" --no-audit --no-fund --silent gltf-validator@2.0.0-dev.3.10; then
+        echo "validate_gltf: skipped: could not install gltf-validator with npm"
+        exit 0
+    fi
 fi
 BIN=${SMOCAP_BIN:-}
 if [ -z "$BIN" ]; then
