@@ -70,7 +70,8 @@ fn shared_trial(dir: &Path, name: &str, files: [&str; 6]) -> Option<PathBuf> {
 fn world_at_key(doc: &gltf::Gltf, key: usize) -> (Vec<Matrix4<f64>>, Vec<String>) {
     let blob = doc.blob.as_deref().unwrap();
     let n = doc.document.nodes().count();
-    let mut trs: Vec<([f32; 3], [f32; 4], [f32; 3])> = doc.document.nodes().map(|nd| nd.transform().decomposed()).collect();
+    let mut trs: Vec<([f32; 3], [f32; 4], [f32; 3])> =
+        doc.document.nodes().map(|nd| nd.transform().decomposed()).collect();
     for anim in doc.document.animations() {
         for ch in anim.channels() {
             let r = ch.reader(|_| Some(blob));
@@ -96,7 +97,12 @@ fn world_at_key(doc: &gltf::Gltf, key: usize) -> (Vec<Matrix4<f64>>, Vec<String>
         t * q.to_homogeneous() * Matrix4::new_nonuniform_scaling(&Vector3::new(s[0] as f64, s[1] as f64, s[2] as f64))
     };
     let mut world: Vec<Option<Matrix4<f64>>> = vec![None; n];
-    fn eval(i: usize, parent: &[Option<usize>], local: &dyn Fn(usize) -> Matrix4<f64>, w: &mut Vec<Option<Matrix4<f64>>>) -> Matrix4<f64> {
+    fn eval(
+        i: usize,
+        parent: &[Option<usize>],
+        local: &dyn Fn(usize) -> Matrix4<f64>,
+        w: &mut Vec<Option<Matrix4<f64>>>,
+    ) -> Matrix4<f64> {
         if let Some(m) = w[i] {
             return m;
         }

@@ -122,14 +122,22 @@ fn project_puts_a_marker_straight_ahead_of_a_camera_at_its_principal_point_in_th
     )
     .unwrap();
     let out = dir.join("gt");
-    let o = smocap(&["project", file.to_str().unwrap(), "--cameras", rig.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let o = smocap(&[
+        "project",
+        file.to_str().unwrap(),
+        "--cameras",
+        rig.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let coco: Value = serde_json::from_slice(&std::fs::read(out.join("ahead.coco.json")).unwrap()).unwrap();
     let cat = &coco["categories"][0];
     assert_eq!(cat["keypoints"][m], take.model.markers[m].name.as_str());
     assert_eq!(cat["keypoints"].as_array().unwrap().len(), take.model.markers.len() + take.model.nb());
     assert_eq!(coco["images"].as_array().unwrap().len(), 20);
-    let ann = coco["annotations"].as_array().unwrap().iter().find(|a| a["image_id"] == 1 && a["category_id"] == 1).unwrap();
+    let ann =
+        coco["annotations"].as_array().unwrap().iter().find(|a| a["image_id"] == 1 && a["category_id"] == 1).unwrap();
     let kp = ann["keypoints"].as_array().unwrap();
     let (u, v, vis) = (kp[3 * m].as_f64().unwrap(), kp[3 * m + 1].as_f64().unwrap(), kp[3 * m + 2].as_f64().unwrap());
     assert!((u - 539.5).abs() < 1e-6 && (v - 359.5).abs() < 1e-6 && vis == 2.0, "({u}, {v}, {vis})");
@@ -137,7 +145,8 @@ fn project_puts_a_marker_straight_ahead_of_a_camera_at_its_principal_point_in_th
     assert_eq!((k[0][2].as_f64(), k[1][2].as_f64()), (Some(539.5), Some(359.5)));
     let csv = std::fs::read_to_string(out.join("keypoints.csv")).unwrap();
     assert!(csv.starts_with("camera,frame,time_s,kind,name,x_m,y_m,z_m,u_px,v_px,depth_m,in_image\n"));
-    let row = csv.lines().find(|l| l.starts_with(&format!("ahead,0,0,marker,{},", take.model.markers[m].name))).unwrap();
+    let row =
+        csv.lines().find(|l| l.starts_with(&format!("ahead,0,0,marker,{},", take.model.markers[m].name))).unwrap();
     let f: Vec<&str> = row.split(',').collect();
     assert!((f[8].parse::<f64>().unwrap() - 539.5).abs() < 1e-6 && (f[9].parse::<f64>().unwrap() - 359.5).abs() < 1e-6);
     let _ = std::fs::remove_dir_all(&dir);
@@ -145,7 +154,9 @@ fn project_puts_a_marker_straight_ahead_of_a_camera_at_its_principal_point_in_th
 
 #[test]
 fn bad_rig_files_are_refused_with_the_reason() {
-    let cam = |extra: &str| format!("[[cameras]]\nname = \"c\"\nposition = [0, 0, 1]\n{extra}width_px = 10\nheight_px = 10\n");
+    let cam = |extra: &str| {
+        format!("[[cameras]]\nname = \"c\"\nposition = [0, 0, 1]\n{extra}width_px = 10\nheight_px = 10\n")
+    };
     let optics = "focal_mm = 33\nsensor_width_mm = 36\n";
     for (text, want) in [
         (cam(&format!("look_at = [1, 0, 1]\n{optics}colour = 1\n")), "unknown field `colour`"),
@@ -163,7 +174,9 @@ fn bad_rig_files_are_refused_with_the_reason() {
         assert!(e.contains(want) && e.contains("bad.toml"), "{e} (wanted {want})");
     }
     // The camera's line is named.
-    let two = cam(&format!("look_at = [1, 0, 1]\n{optics}")) + "\n" + &cam("look_at = [1, 0, 1]\nfocal_mm = -2\nsensor_width_mm = 3\n").replace("\"c\"", "\"d\"");
+    let two = cam(&format!("look_at = [1, 0, 1]\n{optics}"))
+        + "\n"
+        + &cam("look_at = [1, 0, 1]\nfocal_mm = -2\nsensor_width_mm = 3\n").replace("\"c\"", "\"d\"");
     let e = parse_rig(&two, "bad.toml", &SubjectFrame::world()).unwrap_err().to_string();
     assert!(e.contains("line 10: camera 'd'"), "{e}");
 }
@@ -193,7 +206,8 @@ fn project_writes_coco_json_csv_cameras_and_metrics_for_a_converted_shared_trial
     eprintln!("{table}");
     assert!(table.contains("| subject01_walk1 | 16 |"), "{table}");
     for cam in ["frontal", "sagittal"] {
-        let coco: Value = serde_json::from_slice(&std::fs::read(out.join(format!("{cam}.coco.json"))).unwrap()).unwrap();
+        let coco: Value =
+            serde_json::from_slice(&std::fs::read(out.join(format!("{cam}.coco.json"))).unwrap()).unwrap();
         assert_eq!(coco["images"].as_array().unwrap().len(), 16, "151 frames, every 10th");
         assert_eq!(coco["annotations"].as_array().unwrap().len(), 32, "model and observed per image");
         let visible = coco["annotations"][0]["num_keypoints"].as_u64().unwrap();

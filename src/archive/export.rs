@@ -192,7 +192,11 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
 /// writes: fields x, y, z as FLOAT32 at offsets 0, 4, 8, stride 12).
 fn cloud_xyz(c: &proto::PointCloud) -> Result<Vec<f32>, String> {
     if c.point_stride != 12 || c.data.len() % 12 != 0 {
-        return Err(format!("point stride {} and {} bytes: expected packed float32 x y z", c.point_stride, c.data.len()));
+        return Err(format!(
+            "point stride {} and {} bytes: expected packed float32 x y z",
+            c.point_stride,
+            c.data.len()
+        ));
     }
     Ok(c.data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect())
 }

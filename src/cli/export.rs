@@ -60,7 +60,13 @@ pub fn run(a: ExportArgs) -> anyhow::Result<u8> {
         let cams = crate::render::cameras(&take, a.scene.cameras.as_deref(), a.scene.rig_seed)?;
         std::fs::write(out, crate::render::scene::glb(&take, &cams, a.scene.up)?)
             .with_context(|| format!("writing {}", out.display()))?;
-        eprintln!("wrote {} ({} frames, {} bodies, {} cameras)", out.display(), take.len(), take.model.nb(), cams.len());
+        eprintln!(
+            "wrote {} ({} frames, {} bodies, {} cameras)",
+            out.display(),
+            take.len(),
+            take.model.nb(),
+            cams.len()
+        );
         if a.mot.is_none() && a.csv.is_none() {
             return Ok(0);
         }

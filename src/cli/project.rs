@@ -38,7 +38,10 @@ pub fn run(a: ProjectArgs) -> anyhow::Result<u8> {
     use anyhow::Context as _;
     anyhow::ensure!(a.stride >= 1, "--stride {}: expected at least 1", a.stride);
     if let Some(points) = &a.points {
-        let cams = render::rig::read_rig(a.cameras.as_deref().expect("clap requires --cameras"), &render::SubjectFrame::world())?;
+        let cams = render::rig::read_rig(
+            a.cameras.as_deref().expect("clap requires --cameras"),
+            &render::SubjectFrame::world(),
+        )?;
         let pts = project::read_points(points)?;
         project::write_points(&pts, &cams, &a.out)?;
         eprintln!("wrote {} ({} points × {} cameras)", a.out.join("points.csv").display(), pts.len(), cams.len());
@@ -67,7 +70,8 @@ pub fn run(a: ProjectArgs) -> anyhow::Result<u8> {
     rows.sort_by(|x, y| x.trial.cmp(&y.trial));
     print!("{}", project::metrics_table(&rows));
     if let Some(p) = &a.report_json {
-        std::fs::write(p, serde_json::to_string_pretty(&rows)? + "\n").with_context(|| format!("writing {}", p.display()))?;
+        std::fs::write(p, serde_json::to_string_pretty(&rows)? + "\n")
+            .with_context(|| format!("writing {}", p.display()))?;
     }
     Ok(0)
 }

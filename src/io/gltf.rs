@@ -19,7 +19,9 @@ pub enum GltfError {
     ParentOrder { node: String, parent: usize },
     #[error("glTF {what} '{name}': {problem}")]
     Invalid { what: &'static str, name: String, problem: String },
-    #[error("glTF animation key times must increase strictly (as float32): key {index} is {time} s after {previous} s")]
+    #[error(
+        "glTF animation key times must increase strictly (as float32): key {index} is {time} s after {previous} s"
+    )]
     Times { index: usize, time: f64, previous: f64 },
     #[error("glTF serialisation: {0}")]
     Json(String),
@@ -330,7 +332,12 @@ pub fn to_glb(doc: &Document) -> Result<Vec<u8>, GltfError> {
             weights: None,
         });
     }
-    let scene = b.root.push(json::Scene { extensions: None, extras: Default::default(), name: Some("scene".into()), nodes: roots });
+    let scene = b.root.push(json::Scene {
+        extensions: None,
+        extras: Default::default(),
+        name: Some("scene".into()),
+        nodes: roots,
+    });
     b.root.scene = Some(scene);
     if let Some(a) = &doc.animation {
         animation(&mut b, a, doc.nodes.len())?;
@@ -384,9 +391,15 @@ fn animation(b: &mut Builder, a: &Animation, nodes: usize) -> Result<(), GltfErr
             return Err(bad(format!("track of node {} of {nodes}", t.node)));
         }
         let (data, type_, n, path): (Vec<f32>, _, _, _) = match &t.values {
-            Values::Translation(v) => (v.iter().flatten().copied().collect(), Type::Vec3, 3, json::animation::Property::Translation),
-            Values::Rotation(v) => (v.iter().flatten().copied().collect(), Type::Vec4, 4, json::animation::Property::Rotation),
-            Values::Scale(v) => (v.iter().flatten().copied().collect(), Type::Vec3, 3, json::animation::Property::Scale),
+            Values::Translation(v) => {
+                (v.iter().flatten().copied().collect(), Type::Vec3, 3, json::animation::Property::Translation)
+            }
+            Values::Rotation(v) => {
+                (v.iter().flatten().copied().collect(), Type::Vec4, 4, json::animation::Property::Rotation)
+            }
+            Values::Scale(v) => {
+                (v.iter().flatten().copied().collect(), Type::Vec3, 3, json::animation::Property::Scale)
+            }
         };
         if data.len() != n * times.len() {
             return Err(bad(format!("{} values for {} key times", data.len() / n, times.len())));
@@ -419,7 +432,13 @@ fn animation(b: &mut Builder, a: &Animation, nodes: usize) -> Result<(), GltfErr
         });
     }
     if !channels.is_empty() {
-        b.root.push(json::Animation { extensions: None, extras: Default::default(), channels, name: Some(a.name.clone()), samplers });
+        b.root.push(json::Animation {
+            extensions: None,
+            extras: Default::default(),
+            channels,
+            name: Some(a.name.clone()),
+            samplers,
+        });
     }
     Ok(())
 }

@@ -113,7 +113,12 @@ fn coco_keypoints(pixels: &[Option<Pixel>]) -> (Vec<f64>, usize, [f64; 4]) {
 
 /// Projects the frames `frames` of `take` into `cameras`, writes the files above into `dir` and
 /// returns the metrics.
-pub fn write_ground_truth(take: &Take, cameras: &[Camera], frames: &[usize], dir: &Path) -> Result<Metrics, RenderError> {
+pub fn write_ground_truth(
+    take: &Take,
+    cameras: &[Camera],
+    frames: &[usize],
+    dir: &Path,
+) -> Result<Metrics, RenderError> {
     let model = &take.model;
     let names = keypoint_names(take);
     let nm = model.markers.len();
@@ -127,8 +132,10 @@ pub fn write_ground_truth(take: &Take, cameras: &[Camera], frames: &[usize], dir
     let csv_file = csv_path.display().to_string();
     let cv = |e: csv::Error| RenderError::Content { file: csv_file.clone(), what: e.to_string() };
     let mut csv = csv::Writer::from_writer(Vec::new());
-    csv.write_record(["camera", "frame", "time_s", "kind", "name", "x_m", "y_m", "z_m", "u_px", "v_px", "depth_m", "in_image"])
-        .map_err(cv)?;
+    csv.write_record([
+        "camera", "frame", "time_s", "kind", "name", "x_m", "y_m", "z_m", "u_px", "v_px", "depth_m", "in_image",
+    ])
+    .map_err(cv)?;
     let (mut err3, mut n3) = (0.0, 0usize);
     let mut errpx = vec![(0.0, 0usize); cameras.len()];
     let mut ws = Workspace::new(model);
@@ -140,10 +147,11 @@ pub fn write_ground_truth(take: &Take, cameras: &[Camera], frames: &[usize], dir
                 n3 += 1;
             }
         }
-        let points: Vec<(&str, &str, Vector3<f64>)> = (pose.markers.iter().enumerate().map(|(m, p)| ("marker", marker_names[m], *p)))
-            .chain(pose.joints.iter().enumerate().map(|(b, p)| ("joint", names[nm + b].as_str(), *p)))
-            .chain(pose.observed.iter().enumerate().filter_map(|(m, p)| Some(("observed", marker_names[m], (*p)?))))
-            .collect();
+        let points: Vec<(&str, &str, Vector3<f64>)> =
+            (pose.markers.iter().enumerate().map(|(m, p)| ("marker", marker_names[m], *p)))
+                .chain(pose.joints.iter().enumerate().map(|(b, p)| ("joint", names[nm + b].as_str(), *p)))
+                .chain(pose.observed.iter().enumerate().filter_map(|(m, p)| Some(("observed", marker_names[m], (*p)?))))
+                .collect();
         for (c, cam) in cameras.iter().enumerate() {
             let image_id = k + 1;
             images[c].push(json!({
@@ -198,9 +206,14 @@ pub fn write_ground_truth(take: &Take, cameras: &[Camera], frames: &[usize], dir
             }
         }
     }
-    let bytes = csv.into_inner().map_err(|e| RenderError::Content { file: csv_path.display().to_string(), what: e.to_string() })?;
+    let bytes = csv
+        .into_inner()
+        .map_err(|e| RenderError::Content { file: csv_path.display().to_string(), what: e.to_string() })?;
     write_file(&csv_path, &bytes)?;
-    write_file(&dir.join("cameras.json"), &pretty(&json!({ "cameras": cameras.iter().map(camera_json).collect::<Vec<_>>() })))?;
+    write_file(
+        &dir.join("cameras.json"),
+        &pretty(&json!({ "cameras": cameras.iter().map(camera_json).collect::<Vec<_>>() })),
+    )?;
     for (c, cam) in cameras.iter().enumerate() {
         let coco = json!({
             "info": {
@@ -215,7 +228,10 @@ pub fn write_ground_truth(take: &Take, cameras: &[Camera], frames: &[usize], dir
             "images": std::mem::take(&mut images[c]),
             "annotations": std::mem::take(&mut annotations[c]),
         });
-        write_file(&dir.join(format!("{}.coco.json", cam.name)), &serde_json::to_vec(&coco).expect("JSON values serialise"))?;
+        write_file(
+            &dir.join(format!("{}.coco.json", cam.name)),
+            &serde_json::to_vec(&coco).expect("JSON values serialise"),
+        )?;
     }
     let metrics = Metrics {
         trial: take.name.clone(),
@@ -225,7 +241,11 @@ pub fn write_ground_truth(take: &Take, cameras: &[Camera], frames: &[usize], dir
         cameras: cameras
             .iter()
             .zip(&errpx)
-            .map(|(c, &(s, n))| CameraMetrics { camera: c.name.clone(), marker_error_px: (n > 0).then(|| s / n as f64), pairs: n })
+            .map(|(c, &(s, n))| CameraMetrics {
+                camera: c.name.clone(),
+                marker_error_px: (n > 0).then(|| s / n as f64),
+                pairs: n,
+            })
             .collect(),
     };
     write_file(&dir.join("metrics.json"), &pretty(&serde_json::to_value(&metrics).expect("metrics serialise")))?;
@@ -249,9 +269,13 @@ pub fn write_points(points: &[(String, Vector3<f64>)], cameras: &[Camera], dir: 
             csv.write_record(&rec).map_err(cv)?;
         }
     }
-    let bytes = csv.into_inner().map_err(|e| RenderError::Content { file: path.display().to_string(), what: e.to_string() })?;
+    let bytes =
+        csv.into_inner().map_err(|e| RenderError::Content { file: path.display().to_string(), what: e.to_string() })?;
     write_file(&path, &bytes)?;
-    write_file(&dir.join("cameras.json"), &pretty(&json!({ "cameras": cameras.iter().map(camera_json).collect::<Vec<_>>() })))
+    write_file(
+        &dir.join("cameras.json"),
+        &pretty(&json!({ "cameras": cameras.iter().map(camera_json).collect::<Vec<_>>() })),
+    )
 }
 
 /// Reads named points from a CSV with columns `name,x,y,z` (m, `world`; a header row).
@@ -266,7 +290,9 @@ pub fn read_points(path: &Path) -> Result<Vec<(String, Vector3<f64>)>, RenderErr
         if rec.len() != 4 {
             return Err(bad(format!("line {line}: expected name,x,y,z, found {} fields", rec.len())));
         }
-        let v = |k: usize| rec[k].trim().parse::<f64>().map_err(|_| bad(format!("line {line}: '{}' is not a number", &rec[k])));
+        let v = |k: usize| {
+            rec[k].trim().parse::<f64>().map_err(|_| bad(format!("line {line}: '{}' is not a number", &rec[k])))
+        };
         out.push((rec[0].to_string(), Vector3::new(v(1)?, v(2)?, v(3)?)));
     }
     Ok(out)
@@ -274,7 +300,8 @@ pub fn read_points(path: &Path) -> Result<Vec<(String, Vector3<f64>)>, RenderErr
 
 /// A Markdown table of metrics: trial, frames, 3D marker error (mm), then per camera the pixel error.
 pub fn metrics_table(rows: &[Metrics]) -> String {
-    let cams: Vec<String> = rows.first().map(|m| m.cameras.iter().map(|c| c.camera.clone()).collect()).unwrap_or_default();
+    let cams: Vec<String> =
+        rows.first().map(|m| m.cameras.iter().map(|c| c.camera.clone()).collect()).unwrap_or_default();
     let mut s = String::from("| trial | frames | 3D marker error (mm) |");
     for c in &cams {
         s += &format!(" {c} (px) |");

@@ -153,7 +153,13 @@ pub struct SubjectFrame {
 impl SubjectFrame {
     /// The world frame itself (origin 0, forward +x): for rigs not tied to a trial.
     pub fn world() -> SubjectFrame {
-        SubjectFrame { origin: Vector3::zeros(), forward: Vector3::x(), left: Vector3::y(), root_height: 1.0, half_path: 0.0 }
+        SubjectFrame {
+            origin: Vector3::zeros(),
+            forward: Vector3::x(),
+            left: Vector3::y(),
+            root_height: 1.0,
+            half_path: 0.0,
+        }
     }
 
     /// From the root body's `world` positions and x axes per frame.
@@ -170,7 +176,13 @@ impl SubjectFrame {
         let left = Vector3::z().cross(&forward);
         let along: Vec<f64> = positions.iter().map(|p| (p - mean).dot(&forward)).collect();
         let (lo, hi) = along.iter().fold((0.0f64, 0.0f64), |(a, b), &x| (a.min(x), b.max(x)));
-        SubjectFrame { origin: Vector3::new(mean.x, mean.y, 0.0), forward, left, root_height: mean.z, half_path: (hi - lo) / 2.0 }
+        SubjectFrame {
+            origin: Vector3::new(mean.x, mean.y, 0.0),
+            forward,
+            left,
+            root_height: mean.z,
+            half_path: (hi - lo) / 2.0,
+        }
     }
 
     /// The rotation from this frame's axes to `world` (columns forward, left, up).
@@ -208,10 +220,8 @@ pub fn default_rig(frame: &SubjectFrame, seed: u64) -> Vec<Camera> {
     let target = frame.origin + Vector3::z() * frame.root_height;
     let half_width = DEFAULT_SENSOR_WIDTH_MM / 2.0 / DEFAULT_FOCAL_MM;
     let side = DEFAULT_DISTANCE_M.max((frame.half_path + 1.0) / half_width);
-    let nominal = [
-        ("frontal", frame.forward * (frame.half_path + DEFAULT_DISTANCE_M)),
-        ("sagittal", -frame.left * side),
-    ];
+    let nominal =
+        [("frontal", frame.forward * (frame.half_path + DEFAULT_DISTANCE_M)), ("sagittal", -frame.left * side)];
     nominal
         .into_iter()
         .map(|(name, offset)| {

@@ -235,7 +235,8 @@ const RINGS: usize = 4;
 pub fn capsule(a: Vector3<f64>, b: Vector3<f64>, r: f64) -> Primitive {
     let w = (b - a).normalize();
     let h = std::f64::consts::FRAC_PI_2 / RINGS as f64;
-    let mut rings: Vec<(Vector3<f64>, f64)> = (1..=RINGS).map(|k| (a, -std::f64::consts::FRAC_PI_2 + k as f64 * h)).collect();
+    let mut rings: Vec<(Vector3<f64>, f64)> =
+        (1..=RINGS).map(|k| (a, -std::f64::consts::FRAC_PI_2 + k as f64 * h)).collect();
     rings.extend((0..RINGS).map(|k| (b, k as f64 * h)));
     round(a - w * r, b + w * r, w, &rings, r)
 }
@@ -243,12 +244,19 @@ pub fn capsule(a: Vector3<f64>, b: Vector3<f64>, r: f64) -> Primitive {
 /// A sphere of radius `r` at `c`.
 pub fn sphere(c: Vector3<f64>, r: f64) -> Primitive {
     let h = std::f64::consts::PI / (2 * RINGS) as f64;
-    let rings: Vec<(Vector3<f64>, f64)> = (1..2 * RINGS).map(|k| (c, -std::f64::consts::FRAC_PI_2 + k as f64 * h)).collect();
+    let rings: Vec<(Vector3<f64>, f64)> =
+        (1..2 * RINGS).map(|k| (c, -std::f64::consts::FRAC_PI_2 + k as f64 * h)).collect();
     round(c - Vector3::z() * r, c + Vector3::z() * r, Vector3::z(), &rings, r)
 }
 
 /// A closed surface of revolution about `w`: two poles and rings `(centre, latitude)`.
-fn round(south: Vector3<f64>, north: Vector3<f64>, w: Vector3<f64>, rings: &[(Vector3<f64>, f64)], r: f64) -> Primitive {
+fn round(
+    south: Vector3<f64>,
+    north: Vector3<f64>,
+    w: Vector3<f64>,
+    rings: &[(Vector3<f64>, f64)],
+    r: f64,
+) -> Primitive {
     let u = if w.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
     let u = (u - w * w.dot(&u)).normalize();
     let v = w.cross(&u);

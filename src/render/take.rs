@@ -80,7 +80,11 @@ impl Take {
             let row = model
                 .coordinates
                 .iter()
-                .map(|c| s.q.get(&c.name).copied().ok_or_else(|| bad(format!("frame {} has no coordinate '{}'", s.frame, c.name))))
+                .map(|c| {
+                    s.q.get(&c.name)
+                        .copied()
+                        .ok_or_else(|| bad(format!("frame {} has no coordinate '{}'", s.frame, c.name)))
+                })
                 .collect::<Result<Vec<f64>, _>>()?;
             let cloud = rec.observed.get(&s.frame);
             let obs = index
@@ -125,7 +129,9 @@ impl Take {
             times.push(trial.times.get(f).map_or(f as f64 / trial.rate_hz.max(1e-9), |t| t - t0));
             frames.push(f);
             observed.push(
-                cols.iter().map(|c| c.and_then(|c| trial.position(f, c)).map(|p| Vector3::new(p[0], p[1], p[2]))).collect(),
+                cols.iter()
+                    .map(|c| c.and_then(|c| trial.position(f, c)).map(|p| Vector3::new(p[0], p[1], p[2])))
+                    .collect(),
             );
         }
         let name = Path::new(&result.name).file_stem().map_or("trial".into(), |s| s.to_string_lossy().into_owned());
@@ -161,8 +167,7 @@ impl Take {
         let r0 = *self.world_from_model.to_rotation_matrix().matrix();
         let body_rot: Vec<Matrix3<f64>> = ws.body_rot.iter().map(|r| r0 * r).collect();
         let body_pos: Vec<Vector3<f64>> = ws.body_pos.iter().map(|p| r0 * p).collect();
-        let joints =
-            (0..self.model.nb()).map(|b| body_pos[b] + body_rot[b] * self.joint_centre_local(b)).collect();
+        let joints = (0..self.model.nb()).map(|b| body_pos[b] + body_rot[b] * self.joint_centre_local(b)).collect();
         let markers = (0..self.model.markers.len()).map(|m| r0 * ws.marker(m)).collect();
         let observed = self.observed[i].iter().map(|o| o.map(|p| r0 * p)).collect();
         Pose { body_rot, body_pos, markers, joints, observed }
@@ -182,7 +187,8 @@ pub fn side_of(name: &str) -> Side {
     let bytes = name.as_bytes();
     let caps = |c: u8| bytes.len() > 1 && bytes[0] == c && bytes[1].is_ascii_uppercase();
     let is = |s: char| {
-        let (p1, p2, p3, suf) = (format!("{s}_"), format!("{s}."), if s == 'r' { "right" } else { "left" }, format!("_{s}"));
+        let (p1, p2, p3, suf) =
+            (format!("{s}_"), format!("{s}."), if s == 'r' { "right" } else { "left" }, format!("_{s}"));
         lower.starts_with(&p1) || lower.starts_with(&p2) || lower.starts_with(p3) || lower.ends_with(&suf)
     };
     if is('r') || caps(b'R') {
