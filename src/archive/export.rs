@@ -191,7 +191,7 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
 /// The points of a `/markers` cloud as float32 x y z triples (the layout `smocap convert`
 /// writes: fields x, y, z as FLOAT32 at offsets 0, 4, 8, stride 12).
 fn cloud_xyz(c: &proto::PointCloud) -> Result<Vec<f32>, String> {
-    if c.point_stride != 12 || c.data.len() % 12 != 0 {
+    if c.point_stride != 12 || !c.data.len().is_multiple_of(12) {
         return Err(format!(
             "point stride {} and {} bytes: expected packed float32 x y z",
             c.point_stride,

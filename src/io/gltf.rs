@@ -139,7 +139,7 @@ struct Builder {
 impl Builder {
     /// Appends `bytes` as a new buffer view (4-byte aligned) and returns it.
     fn view(&mut self, bytes: &[u8], target: Option<json::buffer::Target>) -> json::Index<json::buffer::View> {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         let offset = self.bin.len();
@@ -248,7 +248,7 @@ pub fn to_glb(doc: &Document) -> Result<Vec<u8>, GltfError> {
             if p.material >= doc.materials.len() {
                 return Err(bad(format!("material {} of {}", p.material, doc.materials.len())));
             }
-            if p.normals.len() != p.positions.len() || p.indices.len() % 3 != 0 || p.positions.is_empty() {
+            if p.normals.len() != p.positions.len() || !p.indices.len().is_multiple_of(3) || p.positions.is_empty() {
                 return Err(bad("positions, normals and triangles do not match".into()));
             }
             if let Some(i) = p.indices.iter().find(|&&i| i as usize >= p.positions.len()) {
@@ -342,7 +342,7 @@ pub fn to_glb(doc: &Document) -> Result<Vec<u8>, GltfError> {
     if let Some(a) = &doc.animation {
         animation(&mut b, a, doc.nodes.len())?;
     }
-    while b.bin.len() % 4 != 0 {
+    while !b.bin.len().is_multiple_of(4) {
         b.bin.push(0);
     }
     if !b.bin.is_empty() {
@@ -356,7 +356,7 @@ pub fn to_glb(doc: &Document) -> Result<Vec<u8>, GltfError> {
     }
     let mut text = json::serialize::to_vec(&b.root).map_err(|e| GltfError::Json(e.to_string()))?;
     // The JSON chunk is padded with spaces (the container pads with zeros otherwise).
-    while text.len() % 4 != 0 {
+    while !text.len().is_multiple_of(4) {
         text.push(b' ');
     }
     let glb = ::gltf::binary::Glb {
