@@ -47,21 +47,24 @@ pub fn run(a: ProjectArgs) -> anyhow::Result<u8> {
         eprintln!("wrote {} ({} points × {} cameras)", a.out.join("points.csv").display(), pts.len(), cams.len());
         return Ok(0);
     }
+    // One folder per file: `--out` itself for one file; for several, each file's path below the
+    // folder they all lie in, without its extension (`--out/<dataset>/<subject>/<trial>`).
+    let base = common_folder(&a.files);
     let mut dirs = std::collections::BTreeMap::new();
     for f in &a.files {
-        let dir = if a.files.len() == 1 {
-            a.out.clone()
-        } else {
-            a.out.join(f.file_stem().map_or("trial".into(), |s| s.to_string_lossy().into_owned()))
-        };
-        if let Some(other) = dirs.insert(dir.clone(), f) {
+        let rel = f.strip_prefix(&base).unwrap_or(f).with_extension("");
+        let dir = if a.files.len() == 1 { a.out.clone() } else { a.out.join(&rel) };
+        if let Some((other, _)) = dirs.insert(dir.clone(), (f, rel.display().to_string())) {
             anyhow::bail!("{} and {} would both write into {}", other.display(), f.display(), dir.display());
         }
     }
     let mut rows = Vec::new();
-    for (dir, f) in &dirs {
+    for (dir, (f, rel)) in &dirs {
         let rec = crate::archive::export::read_trial_record(f)?;
-        let take = render::Take::from_record(&rec, f)?;
+        let mut take = render::Take::from_record(&rec, f)?;
+        if a.files.len() > 1 {
+            take.name = rel.clone();
+        }
         let cams = render::cameras(&take, a.cameras.as_deref(), a.rig_seed)?;
         let m = project::write_ground_truth(&take, &cams, &take.strided(a.stride), dir)?;
         eprintln!("wrote {} ({} frames × {} cameras)", dir.display(), m.frames, cams.len());
@@ -74,4 +77,13 @@ pub fn run(a: ProjectArgs) -> anyhow::Result<u8> {
             .with_context(|| format!("writing {}", p.display()))?;
     }
     Ok(0)
+}
+
+/// The deepest folder holding every file of `files` (their parents' common prefix).
+fn common_folder(files: &[PathBuf]) -> PathBuf {
+    let parents: Vec<Vec<std::path::Component>> =
+        files.iter().map(|f| f.parent().map(|p| p.components().collect()).unwrap_or_default()).collect();
+    let Some(first) = parents.first() else { return PathBuf::new() };
+    let n = (0..first.len()).take_while(|&i| parents.iter().all(|p| p.get(i) == Some(&first[i]))).count();
+    first[..n].iter().collect()
 }
