@@ -4,7 +4,8 @@
 //! Data flows through the modules in this order: [`io`] (marker files, model files) →
 //! [`model`] (immutable tree, scales, markers, proxy map) → [`kinematics`] (forward kinematics,
 //! Jacobians, Gauss–Newton assembly) → [`solve`] (trust-region QP, QP backends, calibration) →
-//! [`pipeline`] (trials, reports) → [`archive`] (whole datasets to MCAP) → the `smocap` command line;
+//! [`pipeline`] (trials, reports) → [`archive`] (whole datasets to MCAP) → [`render`] (glTF scenes,
+//! cameras, 2D ground truth, previews) → the `smocap` command line;
 //! [`eval`] holds the evaluation studies built on the pipeline.
 
 pub mod archive;
