@@ -218,3 +218,31 @@ fn gltf_export_names_bodies_markers_and_cameras_and_is_byte_identical_across_run
     assert_eq!(input.count(), take.len(), "one key per frame");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn solve_writes_one_glb_per_trial_into_its_gltf_dir() {
+    let dir = tmp("solve");
+    let (trc, truth, out) = (dir.join("walk.trc"), dir.join("walk.json"), dir.join("glb"));
+    let run = |args: &[&str]| {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_smocap")).args(args).output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    run(&[
+        "synth",
+        "--frames",
+        "40",
+        "--seed",
+        "3",
+        "--out",
+        trc.to_str().unwrap(),
+        "--truth",
+        truth.to_str().unwrap(),
+    ]);
+    run(&["solve", trc.to_str().unwrap(), "--gltf-dir", out.to_str().unwrap(), "--gltf-up", "z"]);
+    let doc = gltf::Gltf::from_slice(&std::fs::read(out.join("walk.glb")).unwrap()).expect("a valid glb");
+    let world = doc.document.nodes().find(|n| n.name() == Some("world")).unwrap();
+    assert_eq!(world.transform().decomposed().1, [0.0, 0.0, 0.0, 1.0], "--gltf-up z: the world as it is");
+    let input = doc.document.animations().next().unwrap().samplers().next().unwrap().input();
+    assert_eq!(input.count(), 40);
+    let _ = std::fs::remove_dir_all(&dir);
+}

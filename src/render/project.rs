@@ -24,6 +24,40 @@ use serde::Serialize;
 use serde_json::{json, Value};
 use std::path::Path;
 
+/// A COCO keypoint file of one camera.
+#[derive(Debug, Serialize)]
+struct CocoFile {
+    info: Value,
+    camera: Value,
+    categories: Value,
+    images: Vec<CocoImage>,
+    annotations: Vec<CocoAnnotation>,
+}
+
+/// One COCO image: a camera's view of one frame.
+#[derive(Clone, Debug, Serialize)]
+struct CocoImage {
+    id: usize,
+    file_name: String,
+    width: u32,
+    height: u32,
+    frame: usize,
+    time_s: f64,
+}
+
+/// One COCO keypoint annotation (a category's keypoints in one image).
+#[derive(Clone, Debug, Serialize)]
+struct CocoAnnotation {
+    id: usize,
+    image_id: usize,
+    category_id: usize,
+    keypoints: Vec<f64>,
+    num_keypoints: usize,
+    bbox: [f64; 4],
+    area: f64,
+    iscrowd: u8,
+}
+
 /// The thesis' metrics of one trial.
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct Metrics {
@@ -131,7 +165,9 @@ pub fn write_ground_truth(
     let csv_path = dir.join("keypoints.csv");
     let csv_file = csv_path.display().to_string();
     let cv = |e: csv::Error| RenderError::Content { file: csv_file.clone(), what: e.to_string() };
-    let mut csv = csv::Writer::from_writer(Vec::new());
+    std::fs::create_dir_all(dir).map_err(|source| RenderError::Io { file: dir.display().to_string(), source })?;
+    // Streamed to the file: a long trial's rows need not fit in memory.
+    let mut csv = csv::Writer::from_path(&csv_path).map_err(cv)?;
     csv.write_record([
         "camera", "frame", "time_s", "kind", "name", "x_m", "y_m", "z_m", "u_px", "v_px", "depth_m", "in_image",
     ])
@@ -154,14 +190,14 @@ pub fn write_ground_truth(
                 .collect();
         for (c, cam) in cameras.iter().enumerate() {
             let image_id = k + 1;
-            images[c].push(json!({
-                "id": image_id,
-                "file_name": format!("{}/{:06}.png", cam.name, take.frames[i]),
-                "width": cam.width_px,
-                "height": cam.height_px,
-                "frame": take.frames[i],
-                "time_s": take.times[i],
-            }));
+            images[c].push(CocoImage {
+                id: image_id,
+                file_name: format!("{}/{:06}.png", cam.name, take.frames[i]),
+                width: cam.width_px,
+                height: cam.height_px,
+                frame: take.frames[i],
+                time_s: take.times[i],
+            });
             let model_px: Vec<Option<Pixel>> =
                 pose.markers.iter().chain(&pose.joints).map(|p| Some(cam.project(p))).collect();
             let obs_px: Vec<Option<Pixel>> = pose.observed.iter().map(|o| o.map(|p| cam.project(&p))).collect();
@@ -175,16 +211,16 @@ pub fn write_ground_truth(
             }
             for (cat, px) in [(1, &model_px), (2, &obs_px)] {
                 let (kp, n, bbox) = coco_keypoints(px);
-                annotations[c].push(json!({
-                    "id": 2 * k + cat,
-                    "image_id": image_id,
-                    "category_id": cat,
-                    "keypoints": kp,
-                    "num_keypoints": n,
-                    "bbox": bbox,
-                    "area": bbox[2] * bbox[3],
-                    "iscrowd": 0,
-                }));
+                annotations[c].push(CocoAnnotation {
+                    id: 2 * k + cat,
+                    image_id,
+                    category_id: cat,
+                    keypoints: kp,
+                    num_keypoints: n,
+                    bbox,
+                    area: bbox[2] * bbox[3],
+                    iscrowd: 0,
+                });
             }
             for (kind, name, p) in &points {
                 let px = cam.project(p);
@@ -206,32 +242,31 @@ pub fn write_ground_truth(
             }
         }
     }
-    let bytes = csv
-        .into_inner()
-        .map_err(|e| RenderError::Content { file: csv_path.display().to_string(), what: e.to_string() })?;
-    write_file(&csv_path, &bytes)?;
+    csv.flush().map_err(|source| RenderError::Io { file: csv_path.display().to_string(), source })?;
+    drop(csv);
     write_file(
         &dir.join("cameras.json"),
         &pretty(&json!({ "cameras": cameras.iter().map(camera_json).collect::<Vec<_>>() })),
     )?;
     for (c, cam) in cameras.iter().enumerate() {
-        let coco = json!({
-            "info": {
+        let coco = CocoFile {
+            info: json!({
                 "description": format!("smocap ground truth of {} from camera {}", take.name, cam.name),
                 "version": env!("CARGO_PKG_VERSION"),
-            },
-            "camera": camera_json(cam),
-            "categories": [
+            }),
+            camera: camera_json(cam),
+            categories: json!([
                 { "id": 1, "name": "model", "supercategory": "person", "keypoints": names, "keypoint_kinds": kinds, "skeleton": skeleton },
                 { "id": 2, "name": "observed", "supercategory": "person", "keypoints": marker_names, "skeleton": [] },
-            ],
-            "images": std::mem::take(&mut images[c]),
-            "annotations": std::mem::take(&mut annotations[c]),
-        });
-        write_file(
-            &dir.join(format!("{}.coco.json", cam.name)),
-            &serde_json::to_vec(&coco).expect("JSON values serialise"),
-        )?;
+            ]),
+            images: std::mem::take(&mut images[c]),
+            annotations: std::mem::take(&mut annotations[c]),
+        };
+        let path = dir.join(format!("{}.coco.json", cam.name));
+        let io = |source| RenderError::Io { file: path.display().to_string(), source };
+        let mut w = std::io::BufWriter::new(std::fs::File::create(&path).map_err(io)?);
+        serde_json::to_writer(&mut w, &coco).map_err(|e| io(e.into()))?;
+        std::io::Write::flush(&mut w).map_err(io)?;
     }
     let metrics = Metrics {
         trial: take.name.clone(),
