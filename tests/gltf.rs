@@ -246,3 +246,32 @@ fn solve_writes_one_glb_per_trial_into_its_gltf_dir() {
     assert_eq!(input.count(), 40);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn gltf_cameras_sit_at_the_rigs_centres_looking_along_their_optical_axes() {
+    let dir = tmp("cams");
+    let file = synthetic(&dir, 20);
+    let rec = smocap::archive::export::read_trial_record(&file).unwrap();
+    let take = Take::from_record(&rec, &file).unwrap();
+    let cams = render::cameras(&take, None, 7).unwrap();
+    for up in [Up::Y, Up::Z] {
+        let doc = gltf::Gltf::from_slice(&render::scene::glb(&take, &cams, up).unwrap()).unwrap();
+        let (world, names) = world_at_key(&doc, 0);
+        for c in &cams {
+            let i = names.iter().position(|n| *n == c.name).unwrap();
+            let m = world[i];
+            let at = Vector3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]);
+            // glTF cameras look along their node's −Z, with +Y up (OpenCV's −y).
+            let look = -Vector3::new(m[(0, 2)], m[(1, 2)], m[(2, 2)]);
+            let img_up = Vector3::new(m[(0, 1)], m[(1, 1)], m[(2, 1)]);
+            let s = up.scene_from_world();
+            assert!((at - s * c.centre()).norm() < 1e-5, "{}: {at} vs {}", c.name, s * c.centre());
+            assert!((look - s * c.r.row(2).transpose()).norm() < 1e-6, "{}", c.name);
+            assert!((img_up + s * c.r.row(1).transpose()).norm() < 1e-6, "{}", c.name);
+            let cam = doc.document.cameras().find(|x| x.name() == Some(c.name.as_str())).unwrap();
+            let gltf::camera::Projection::Perspective(p) = cam.projection() else { panic!("perspective") };
+            assert!((p.yfov() as f64 - c.yfov()).abs() < 1e-6 && (p.aspect_ratio().unwrap() - 1.5).abs() < 1e-6);
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
