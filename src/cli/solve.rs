@@ -95,6 +95,9 @@ pub struct SolveArgs {
     /// Camera rig (TOML) of the glTF scenes; default: the built-in two-camera rig per trial.
     #[arg(long)]
     pub gltf_cameras: Option<PathBuf>,
+    /// Seed of the default rig's perturbation of camera positions in the glTF scenes.
+    #[arg(long, default_value_t = 0)]
+    pub gltf_rig_seed: u64,
     /// Pre-solve (root placement + root-to-leaf local fits before the trust-region QP): `never`;
     /// `auto` re-solves frames whose RMSE is an outlier of their trial (median + 6 MAD); `always`
     /// pre-solves every warm-started frame. Overrides the profile's `presolve` (default `auto`).
@@ -350,7 +353,7 @@ fn export(
             let path = dir.join(out_name(&r.name, "glb"));
             anyhow::ensure!(written.insert(path.clone()), "--gltf-dir: two trials would both write {}", path.display());
             let take = crate::render::Take::from_solve(ctx, r, trial)?;
-            let cams = crate::render::cameras(&take, a.gltf_cameras.as_deref(), 0)?;
+            let cams = crate::render::cameras(&take, a.gltf_cameras.as_deref(), a.gltf_rig_seed)?;
             std::fs::write(&path, crate::render::scene::glb(&take, &cams, a.gltf_up)?)
                 .with_context(|| format!("writing {}", path.display()))?;
             eprintln!("wrote {}", path.display());
