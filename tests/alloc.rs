@@ -112,7 +112,14 @@ fn writing_frames_allocates_far_less_than_once_per_frame() {
     };
     // The frames, made before counting (the solver hands them over as they are).
     let frames: Vec<SolvedFrame> = (0..n)
-        .map(|f| SolvedFrame { index: f, proxies: s.truth.proxies[f].clone(), stats, seconds: 1e-4, bridged: false })
+        .map(|f| SolvedFrame {
+            index: f,
+            proxies: s.truth.proxies[f].clone(),
+            stats,
+            seconds: 1e-4,
+            bridged: false,
+            observed: Vec::new(),
+        })
         .collect();
     w.frame(&frames[0]).unwrap(); // warm-up: message buffers reach their sizes
     let before = ALLOCATIONS.load(Ordering::Relaxed);

@@ -51,6 +51,27 @@ impl TrcError {
 ///
 /// The file is read a line at a time: what is held is the trial's arrays, not its text.
 pub fn read_trc(path: &Path) -> Result<MarkerTrial, TrcError> {
+    scan_trc(path, usize::MAX).map(|(t, _)| t)
+}
+
+/// Where each frame's row starts in a TRC file, to read frames again on demand
+/// ([`TrcRows::read`]).
+#[derive(Clone, Debug)]
+pub struct TrcRows {
+    file: String,
+    path: std::path::PathBuf,
+    /// Byte offset and 1-based line number of each frame's row.
+    rows: Vec<(u64, u32)>,
+    /// Line breaks: `\n` (a trailing `\r` dropped) or `\r` alone.
+    eol: u8,
+    per_m: f64,
+    n_markers: usize,
+}
+
+/// Reads a TRC file as [`read_trc`] does, holding the positions only when the file has at most
+/// `keep` frames (otherwise `positions` is empty and frames are read on demand through the
+/// returned [`TrcRows`]); every row is parsed, so errors are found here either way.
+pub fn scan_trc(path: &Path, keep: usize) -> Result<(MarkerTrial, TrcRows), TrcError> {
     let file = path.display().to_string();
     let io = |source| TrcError::Io { file: file.clone(), source };
     let f = std::fs::File::open(path).map_err(io)?;
@@ -62,26 +83,78 @@ pub fn read_trc(path: &Path) -> Result<MarkerTrial, TrcError> {
     let mut buf = Vec::new();
     let mut lossy = false;
     let mut p = Parser::new(&file, size);
+    p.keep = keep;
+    let mut at = 0u64;
     loop {
         buf.clear();
-        if r.read_until(eol, &mut buf).map_err(io)? == 0 {
+        let n = r.read_until(eol, &mut buf).map_err(io)?;
+        if n == 0 {
             break;
         }
-        if buf.last() == Some(&eol) {
-            buf.pop();
-        }
-        if eol == b'\n' && buf.last() == Some(&b'\r') {
-            buf.pop();
-        }
-        let line = String::from_utf8_lossy(&buf);
+        p.offset = at;
+        at += n as u64;
+        let line = String::from_utf8_lossy(trim_eol(&mut buf, eol));
         lossy |= matches!(line, std::borrow::Cow::Owned(_));
         p.line(&line)?;
     }
+    let per_m = p.header.as_ref().map_or(1.0, |h| h.per_m);
+    let rows = std::mem::take(&mut p.offsets);
     let mut trial = p.finish()?;
     if lossy {
         trial.warnings.push("file is not valid UTF-8; bad bytes replaced".into());
     }
-    Ok(trial)
+    let n_markers = trial.n_markers();
+    Ok((trial, TrcRows { file, path: path.to_path_buf(), rows, eol, per_m, n_markers }))
+}
+
+/// `buf` without its line break.
+fn trim_eol(buf: &mut Vec<u8>, eol: u8) -> &[u8] {
+    if buf.last() == Some(&eol) {
+        buf.pop();
+    }
+    if eol == b'\n' && buf.last() == Some(&b'\r') {
+        buf.pop();
+    }
+    buf
+}
+
+impl TrcRows {
+    /// Frames in the file.
+    pub fn n_frames(&self) -> usize {
+        self.rows.len()
+    }
+
+    /// Positions of frames `range` (metres, frame-major as [`MarkerTrial::positions`]), read
+    /// again from the file.
+    pub fn read(&self, range: std::ops::Range<usize>) -> Result<Vec<f64>, TrcError> {
+        let io = |source| TrcError::Io { file: self.file.clone(), source };
+        let range = range.start.min(self.rows.len())..range.end.min(self.rows.len());
+        let mut p = Parser::new(&self.file, 0);
+        p.header = Some(Header { per_m: self.per_m, first_data: 0, num_frames: None });
+        p.trial.labels = vec![String::new(); self.n_markers];
+        p.trial.positions.reserve_exact(range.len() * 3 * self.n_markers);
+        let Some(&(start, _)) = self.rows.get(range.start) else { return Ok(Vec::new()) };
+        let mut f = std::fs::File::open(&self.path).map_err(io)?;
+        std::io::Seek::seek(&mut f, std::io::SeekFrom::Start(start)).map_err(io)?;
+        let mut r = BufReader::with_capacity(1 << 16, f);
+        let mut buf = Vec::new();
+        for &(_, line) in &self.rows[range.clone()] {
+            // Rows are the non-empty lines: skip empty ones between them.
+            loop {
+                buf.clear();
+                if r.read_until(self.eol, &mut buf).map_err(io)? == 0 {
+                    return Err(TrcError::NoData { file: self.file.clone(), line: line as usize });
+                }
+                let text = String::from_utf8_lossy(trim_eol(&mut buf, self.eol));
+                if text.trim().is_empty() {
+                    continue;
+                }
+                p.row(line as usize, &text)?;
+                break;
+            }
+        }
+        Ok(p.trial.positions)
+    }
 }
 
 /// At most 40 characters of `s`, for error messages.
@@ -189,6 +262,11 @@ struct Parser {
     time_warned: bool,
     /// Bytes fed so far.
     fed: u64,
+    /// Frames whose positions are held (beyond it, rows are parsed and checked only).
+    keep: usize,
+    /// Byte offset of the line being fed (set by the caller), and that of each frame's row.
+    offset: u64,
+    offsets: Vec<(u64, u32)>,
 }
 
 impl Parser {
@@ -203,6 +281,9 @@ impl Parser {
             warnings: Vec::new(),
             time_warned: false,
             fed: 0,
+            keep: usize::MAX,
+            offset: 0,
+            offsets: Vec::new(),
         }
     }
 
@@ -310,11 +391,11 @@ impl Parser {
         let per_m = self.header.as_ref().map_or(1.0, |h| h.per_m);
         let trial = &mut self.trial;
         let nm = trial.labels.len();
-        if trial.times.is_empty() {
+        if trial.times.is_empty() && self.keep > 0 {
             // At most one frame per remaining line of this length: reserved once, so the arrays
             // neither overshoot by doubling nor hold two copies while growing.
             let rows = (self.size.saturating_sub(self.fed) / (raw.len() as u64 + 1)) as usize + 1;
-            let rows = rows + rows / 16 + 16;
+            let rows = (rows + rows / 16 + 16).min(self.keep);
             trial.positions.reserve_exact(rows.saturating_mul(3 * nm));
             trial.times.reserve_exact(rows);
             trial.frame_numbers.reserve_exact(rows);
@@ -348,8 +429,15 @@ impl Parser {
             if p.iter().any(|v| v.is_nan()) {
                 p = [f64::NAN; 3];
             }
-            trial.positions.extend_from_slice(&p);
+            if trial.times.len() < self.keep {
+                trial.positions.extend_from_slice(&p);
+            }
         }
+        if trial.times.len() == self.keep {
+            // More frames than are held: none are.
+            trial.positions = Vec::new();
+        }
+        self.offsets.push((self.offset, line as u32));
         trial.frame_numbers.push(frame);
         trial.times.push(time);
         Ok(())

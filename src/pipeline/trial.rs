@@ -23,6 +23,8 @@ pub enum TrialError {
     NoMarkerMatch { trial: String, trial_labels: String, model_labels: String },
     #[error("trial '{trial}': {source}")]
     Matching { trial: String, source: MatchError },
+    #[error("trial '{trial}': reading its frames: {why}")]
+    Read { trial: String, why: String },
     #[error("trial '{trial}' has no frames")]
     Empty { trial: String },
     #[error("trial '{trial}': no frame has at least {min} observed markers with a weight above 0, nothing to solve")]
