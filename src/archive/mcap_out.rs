@@ -213,13 +213,12 @@ pub struct TrialWriter<'a> {
 }
 
 impl<'a> TrialWriter<'a> {
-    /// Starts `out` (as its temporary file) for `trial` (named `name`), solved with `ctx` for a
+    /// Starts `out` (as its temporary file) for `trial`, solved with `ctx` for a
     /// subject calibrated as `calibration`; writes the schemas, channels and the once-per-trial
     /// messages (`/scene`, `/smocap/subject`).
     pub fn create(
         out: &Path,
         ctx: &'a Context,
-        name: &str,
         trial: &'a MarkerTrial,
         calibration: &Calibration,
         names: &TrialNames,
