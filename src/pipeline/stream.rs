@@ -9,7 +9,7 @@
 use super::frames::{for_each_window, TrialFrames};
 use super::lanes::{resolve_outliers_above, run_lanes, FrameObservations, FrameResult, TrialInputs};
 use super::stats::GapStats;
-use super::trial::{gap_stats, match_markers, no_match, SinkError, TrialError, TrialResult};
+use super::trial::{match_markers, no_match, GapRuns, SinkError, TrialError, TrialResult};
 use super::Context;
 use crate::io::MarkerTrial;
 use crate::kinematics::backend::{BackendError, BatchBackend, CpuBackend};
@@ -196,8 +196,14 @@ pub fn solve_trial_streaming(
         return Err(TrialError::Empty { trial: name.into() });
     }
     let read_err = |why: String| TrialError::Read { trial: name.into(), why };
+    // One pass before solving: frames with enough markers, and each column's gaps.
     let mut solvable = 0;
-    for_each_window(trial, |_, w| solvable += super::verdict::solvable_frames(ctx, w, map)).map_err(read_err)?;
+    let mut runs = GapRuns::new(header.n_markers());
+    for_each_window(trial, |_, w| {
+        solvable += super::verdict::solvable_frames(ctx, w, map);
+        runs.add(w);
+    })
+    .map_err(read_err)?;
     if solvable == 0 {
         return Err(TrialError::NothingSolvable { trial: name.into(), min: ctx.settings.min_markers });
     }
@@ -319,7 +325,7 @@ pub fn solve_trial_streaming(
     let names: Vec<&str> = ctx.model.markers.iter().map(|m| m.name.as_str()).collect();
     let renamed = matched.renamed(&names, &header.labels).into_iter().map(|(a, b)| (a.into(), b.into())).collect();
     let bridged = order.bridged;
-    let gaps = gap_stats_frames(ctx, trial, map, bridged).map_err(read_err)?;
+    let gaps = runs.stats(ctx, map, n, bridged);
     Ok(StreamedTrial {
         name: name.into(),
         frames: n,
@@ -360,48 +366,6 @@ fn outlier_threshold_of(held: &[Option<FrameResult>]) -> f64 {
     crate::solve::presolve::outlier_threshold(&rmse)
 }
 
-/// [`gap_stats`] of a trial read a window at a time.
-fn gap_stats_frames(
-    ctx: &Context,
-    trial: &dyn TrialFrames,
-    map: &[Option<usize>],
-    below_min: usize,
-) -> Result<GapStats, String> {
-    if trial.window_frames() >= trial.header().n_frames() {
-        let w = trial.window(0..trial.header().n_frames())?;
-        return Ok(gap_stats(ctx, &w, map, below_min));
-    }
-    // Per trial column: missing frames, longest run, current run.
-    let mut runs = vec![(0usize, 0usize, 0usize); trial.header().n_markers()];
-    for_each_window(trial, |_, w| {
-        for f in 0..w.n_frames() {
-            for (c, r) in runs.iter_mut().enumerate() {
-                if w.position(f, c).is_none() {
-                    r.0 += 1;
-                    r.2 += 1;
-                    r.1 = r.1.max(r.2);
-                } else {
-                    r.2 = 0;
-                }
-            }
-        }
-    })?;
-    let n = trial.header().n_frames().max(1) as f64;
-    let markers: Vec<super::stats::MarkerGaps> = ctx
-        .model
-        .markers
-        .iter()
-        .zip(map)
-        .filter_map(|(m, c)| c.map(|c| (m, runs[c])))
-        .map(|(m, (missing, longest_gap, _))| super::stats::MarkerGaps {
-            marker: m.name.clone(),
-            missing,
-            missing_fraction: missing as f64 / n,
-            longest_gap,
-        })
-        .collect();
-    Ok(GapStats { missing_samples: markers.iter().map(|m| m.missing).sum(), frames_below_min_markers: below_min, markers })
-}
 
 /// Solves every frame of `trial` for a subject calibrated as `calibration` on the CPU backend,
 /// with `threads` worker threads and as many lanes.
