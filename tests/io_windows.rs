@@ -68,7 +68,8 @@ fn trc_windows_read_the_frames_the_whole_file_has_whatever_the_line_endings() {
 #[test]
 fn c3d_windows_read_the_frames_the_whole_file_has() {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/datasets/c3d_sample01");
-    let files: Vec<PathBuf> = ["Eb015pi.c3d", "Eb015vi.c3d"].iter().map(|f| dir.join(f)).filter(|p| p.is_file()).collect();
+    let files: Vec<PathBuf> =
+        ["Eb015pi.c3d", "Eb015vi.c3d"].iter().map(|f| dir.join(f)).filter(|p| p.is_file()).collect();
     if files.is_empty() {
         eprintln!("note: ../shared/datasets/c3d_sample01 not found; C3D windows checked on the synthetic file only");
     }

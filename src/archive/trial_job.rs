@@ -164,8 +164,8 @@ pub fn solve_and_write(
             }
             Ok(())
         };
-        let mut solved = solve_trial_streaming(ctx, name, trial, &cal.calibration, 1, 1, None, &mut sink)
-            .map_err(|e| e.to_string());
+        let mut solved =
+            solve_trial_streaming(ctx, name, trial, &cal.calibration, 1, 1, None, &mut sink).map_err(|e| e.to_string());
         drop(sink);
         if solved.is_ok() && !batch.is_empty() && tx.send(batch).is_err() {
             solved = Err("the writer stopped".into());

@@ -266,9 +266,20 @@ fn layout(bytes: &[u8], len: u64, name_for_errors: &str) -> Result<(MarkerTrial,
     let frame_numbers = (0..n_frames).map(|i| (first_frame + i as u64) as i64).collect();
     let times = (0..n_frames).map(|i| i as f64 / rate_hz).collect();
     warnings.extend(params.warnings);
-    let trial = MarkerTrial { labels, rate_hz, times, frame_numbers, positions: Vec::new(), source_units: units, warnings };
-    let frames =
-        C3dFrames { path: file.clone().into(), file, proc, data_off: data_off as u64, stride, n_points, n_frames, is_float, scale, per_m };
+    let trial =
+        MarkerTrial { labels, rate_hz, times, frame_numbers, positions: Vec::new(), source_units: units, warnings };
+    let frames = C3dFrames {
+        path: file.clone().into(),
+        file,
+        proc,
+        data_off: data_off as u64,
+        stride,
+        n_points,
+        n_frames,
+        is_float,
+        scale,
+        per_m,
+    };
     Ok((trial, frames))
 }
 

@@ -312,8 +312,11 @@ impl Parser {
     fn read_header(&mut self) -> Result<(), TrcError> {
         let file = self.file.clone();
         let lines = &self.head;
-        let missing =
-            |line: usize, expected: &str| TrcError::MissingHeader { file: file.clone(), line, expected: expected.into() };
+        let missing = |line: usize, expected: &str| TrcError::MissingHeader {
+            file: file.clone(),
+            line,
+            expected: expected.into(),
+        };
         let warnings = &mut self.warnings;
         if !lines.first().is_some_and(|l| l.trim_start().starts_with("PathFileType")) {
             return Err(missing(1, "a `PathFileType` line"));

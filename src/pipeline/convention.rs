@@ -148,11 +148,7 @@ impl Conform {
 
 /// Decides the units and up axis of `trial`'s frames for the model (as [`conform_trial`] does)
 /// without changing them.
-pub fn decide_conventions(
-    ctx: &Context,
-    frames: &dyn TrialFrames,
-    opt: &InputOptions,
-) -> (InputConventions, Conform) {
+pub fn decide_conventions(ctx: &Context, frames: &dyn TrialFrames, opt: &InputOptions) -> (InputConventions, Conform) {
     let trial = frames.header();
     let mut conform = Conform::default();
     let mut out =
@@ -268,7 +264,8 @@ impl Fit {
     fn new(ctx: &Context, frames: &dyn TrialFrames) -> Option<Fit> {
         let names: Vec<&str> = ctx.model.markers.iter().map(|m| m.name.as_str()).collect();
         let map = match_names_with(&names, &frames.header().labels, &ctx.synonyms()).ok()?.columns;
-        let count = |t: &MarkerTrial, f: usize| map.iter().filter(|c| c.and_then(|c| t.position(f, c)).is_some()).count();
+        let count =
+            |t: &MarkerTrial, f: usize| map.iter().filter(|c| c.and_then(|c| t.position(f, c)).is_some()).count();
         let mut counts: Vec<usize> = Vec::with_capacity(frames.header().n_frames());
         for_each_window(frames, |_, w| counts.extend((0..w.n_frames()).map(|f| count(w, f)))).ok()?;
         let most = counts.iter().copied().max().unwrap_or(0);

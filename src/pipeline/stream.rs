@@ -366,7 +366,6 @@ fn outlier_threshold_of(held: &[Option<FrameResult>]) -> f64 {
     crate::solve::presolve::outlier_threshold(&rmse)
 }
 
-
 /// Solves every frame of `trial` for a subject calibrated as `calibration` on the CPU backend,
 /// with `threads` worker threads and as many lanes.
 pub fn solve_trial(

@@ -125,7 +125,11 @@ impl GapRuns {
                 longest_gap,
             })
             .collect();
-        GapStats { missing_samples: markers.iter().map(|m| m.missing).sum(), frames_below_min_markers: below_min, markers }
+        GapStats {
+            missing_samples: markers.iter().map(|m| m.missing).sum(),
+            frames_below_min_markers: below_min,
+            markers,
+        }
     }
 }
 

@@ -534,7 +534,8 @@ impl Tracker {
     /// Starts tracking from `p0` (which also fixes the scales).
     pub fn new(solver: &mut FrameSolver<'_>, p0: &[f64]) -> Tracker {
         let proxy = solver.eval.proxy;
-        let saved = std::mem::replace(&mut solver.free, proxy.proxies.iter().map(|p| p.kind != ProxyKind::Scale).collect());
+        let saved =
+            std::mem::replace(&mut solver.free, proxy.proxies.iter().map(|p| p.kind != ProxyKind::Scale).collect());
         Tracker { p: p0.to_vec(), p0: p0.to_vec(), warm: false, saved }
     }
 
