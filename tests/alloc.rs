@@ -101,7 +101,7 @@ fn writing_frames_allocates_far_less_than_once_per_frame() {
     let out = dir.join("t.mcap");
     let names = TrialNames::default();
     let opt = WriterOptions { chunk_size: 1 << 30, ..WriterOptions::default() };
-    let mut w = TrialWriter::create(&out, &ctx, "t", &s.trial, &cal, &names, &opt).unwrap();
+    let mut w = TrialWriter::create(&out, &ctx, &s.trial, &cal, &names, &opt).unwrap();
     let stats = FrameStats {
         iterations: 1,
         accepted: 1,
@@ -110,9 +110,20 @@ fn writing_frames_allocates_far_less_than_once_per_frame() {
         markers_used: 53,
         status: FrameStatus::Converged,
     };
-    // The frames, made before counting (the solver hands them over as they are).
+    // The frames, made before counting (the solver hands them over as they are), with their
+    // observations in model order as the solver reads them.
+    let map = smocap::pipeline::trial::match_markers(&ctx, "t", &s.trial).unwrap().columns;
+    let obs = smocap::pipeline::trial::observations(&s.trial, &map);
+    let stride = 3 * map.len();
     let frames: Vec<SolvedFrame> = (0..n)
-        .map(|f| SolvedFrame { index: f, proxies: s.truth.proxies[f].clone(), stats, seconds: 1e-4, bridged: false })
+        .map(|f| SolvedFrame {
+            index: f,
+            proxies: s.truth.proxies[f].clone(),
+            stats,
+            seconds: 1e-4,
+            bridged: false,
+            observed: obs[f * stride..(f + 1) * stride].to_vec(),
+        })
         .collect();
     w.frame(&frames[0]).unwrap(); // warm-up: message buffers reach their sizes
     let before = ALLOCATIONS.load(Ordering::Relaxed);

@@ -401,3 +401,29 @@ fn a_trial_failing_mid_stream_leaves_no_output_and_is_reported_failed() {
     assert!(files(&out, ".partial").is_empty(), "temporary file removed");
     assert!(files(&out, ".mcap").is_empty());
 }
+
+#[test]
+fn long_trials_read_a_window_at_a_time_convert_to_the_same_bytes_as_trials_held_whole() {
+    // 700 frames (static trial too): with windows of 150 frames, calibration, the convention
+    // checks, the solve (segments of ~230 frames, their run-ins, the `auto` re-solve) and the
+    // writer all read the files a window at a time.
+    let (dir, toml) = archive("windows", 1, 1, 700);
+    let mut outs = Vec::new();
+    for window in ["150", "100000"] {
+        let out = dir.join(format!("out-{window}"));
+        let o = smocap(&[
+            "convert",
+            toml.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--window-frames",
+            window,
+            "-q",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let mcaps = files(&out, ".mcap");
+        assert_eq!(mcaps.len(), 1, "{mcaps:?}");
+        outs.push(std::fs::read(&mcaps[0]).unwrap());
+    }
+    assert!(outs[0] == outs[1], "the window size changed the output");
+}

@@ -7,8 +7,9 @@ use super::discover::{discover, SubjectGroup, TrialEntry};
 use super::inspect::recorded_run;
 use super::mcap_out::{partial_path, RunInfo, WriterOptions};
 use super::shard::{assign, Shard};
-use super::trial_job::{read_for, solve_and_write, Calibrated};
+use super::trial_job::{open_for, solve_and_write, Calibrated};
 use crate::pipeline::convention::InputOptions;
+use crate::pipeline::frames::TrialFrames;
 use crate::pipeline::stats::P50P90;
 use crate::pipeline::subject::prepare_subject;
 use rayon::prelude::*;
@@ -29,6 +30,10 @@ pub struct ConvertOptions {
     pub progress: Option<std::sync::Arc<super::progress::Progress>>,
     /// How each trial's file is written (epoch, compression).
     pub writer: WriterOptions,
+    /// Trials longer than this are read this many frames at a time (default
+    /// [`super::trial_job::WINDOW_FRAMES`]); shorter ones are held whole. Results do not depend
+    /// on it.
+    pub window_frames: usize,
 }
 
 /// One trial's fate.
@@ -387,26 +392,28 @@ fn subject(
     let input = d.input_options();
     // Calibrate as `solve` does: the static trial (when there is one) and the motion trials whose
     // markers match the model's, together (read for calibration, then again one at a time).
-    let statics: Vec<(String, crate::io::MarkerTrial)> = match &sub.static_path {
-        Some(p) => match read_for(d, &sub.ctx, p, &input) {
+    let window = opt.window_frames;
+    let statics: Vec<(String, Box<dyn TrialFrames>)> = match &sub.static_path {
+        Some(p) => match open_for(d, &sub.ctx, p, &input, window) {
             Ok(t) => vec![(p.display().to_string(), t)],
             Err(e) => return [outcomes, fail_all(format!("static trial: {e}"))].concat(),
         },
         None => Vec::new(),
     };
-    let motions: Vec<(String, crate::io::MarkerTrial)> = g
+    let motions: Vec<(String, Box<dyn TrialFrames>)> = g
         .trials
         .iter()
-        .filter_map(|t| read_for(d, &sub.ctx, &t.path, &input).ok().map(|m| (t.rel.clone(), m)))
+        .filter_map(|t| open_for(d, &sub.ctx, &t.path, &input, window).ok().map(|m| (t.rel.clone(), m)))
         .filter(|(rel, m)| {
-            crate::pipeline::trial::match_markers(&sub.ctx, rel, m).is_ok_and(|x| x.columns.iter().any(Option::is_some))
+            crate::pipeline::trial::match_markers(&sub.ctx, rel, m.header())
+                .is_ok_and(|x| x.columns.iter().any(Option::is_some))
         })
         .collect();
     let cal = if statics.is_empty() && motions.is_empty() {
         Err("no trial to calibrate on".to_string())
     } else {
-        let s: Vec<(&str, &crate::io::MarkerTrial)> = statics.iter().map(|(n, t)| (n.as_str(), t)).collect();
-        let m: Vec<(&str, &crate::io::MarkerTrial)> = motions.iter().map(|(n, t)| (n.as_str(), t)).collect();
+        let s: Vec<(&str, &dyn TrialFrames)> = statics.iter().map(|(n, t)| (n.as_str(), t.as_ref())).collect();
+        let m: Vec<(&str, &dyn TrialFrames)> = motions.iter().map(|(n, t)| (n.as_str(), t.as_ref())).collect();
         crate::pipeline::subject::calibrate_placed_with(&sub.ctx, &s, &m)
             .map_err(|e| format!("calibration failed: {e}"))
     };
@@ -433,7 +440,7 @@ fn subject(
     let solved: Vec<TrialOutcome> = todo
         .par_iter()
         .map(|(t, out, hash)| {
-            let o = solve_one(d, g, t, out, hash, &input, &cal, &opt.writer, opt.progress.as_deref());
+            let o = solve_one(d, g, t, out, hash, &input, &cal, opt);
             report(&o);
             o
         })
@@ -451,11 +458,11 @@ fn solve_one(
     hash: &str,
     input: &InputOptions,
     cal: &Calibrated,
-    writer: &WriterOptions,
-    progress: Option<&super::progress::Progress>,
+    opt: &ConvertOptions,
 ) -> TrialOutcome {
+    let (writer, progress) = (&opt.writer, opt.progress.as_deref());
     let fail = |e: String| failed(d, g, t, out, e);
-    let trial = match read_for(d, &cal.base, &t.path, input) {
+    let trial = match open_for(d, &cal.base, &t.path, input, opt.window_frames) {
         Ok(m) => m,
         Err(e) => return fail(e),
     };
@@ -476,15 +483,15 @@ fn solve_one(
         ("backend", "cpu"),
         ("adapter", "cpu"),
         ("qp_backend", &format!("{:?}", ctx.settings.qp).to_lowercase()),
-        ("frames", &trial.n_frames().to_string()),
-        ("first_sample_time_s", &trial.times.first().copied().unwrap_or(0.0).to_string()),
-        ("rate_hz", &trial.rate_hz.to_string()),
+        ("frames", &trial.header().n_frames().to_string()),
+        ("first_sample_time_s", &trial.header().times.first().copied().unwrap_or(0.0).to_string()),
+        ("rate_hz", &trial.header().rate_hz.to_string()),
         ("rate_source", if d.rate.is_some() { "datasets.toml" } else { "file" }),
     ] {
         run.insert(k.into(), v.into());
     }
     run.insert("epoch_ns".into(), writer.epoch_ns.to_string());
-    match solve_and_write(out, &t.rel, &trial, cal, &run, writer, progress.map(|p| &p.frames_done)) {
+    match solve_and_write(out, &t.rel, trial.as_ref(), cal, &run, writer, progress.map(|p| &p.frames_done)) {
         Ok(s) => TrialOutcome {
             frames: s.frames,
             solve_s: s.solve_s,

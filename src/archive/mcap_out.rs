@@ -188,8 +188,6 @@ struct Channels {
 pub struct TrialWriter<'a> {
     ctx: &'a Context,
     trial: &'a MarkerTrial,
-    /// Trial column of each model marker.
-    cols: Vec<Option<usize>>,
     w: Option<mcap::Writer<BufWriter<std::fs::File>>>,
     tmp: PathBuf,
     out: PathBuf,
@@ -215,13 +213,12 @@ pub struct TrialWriter<'a> {
 }
 
 impl<'a> TrialWriter<'a> {
-    /// Starts `out` (as its temporary file) for `trial` (named `name`), solved with `ctx` for a
+    /// Starts `out` (as its temporary file) for `trial`, solved with `ctx` for a
     /// subject calibrated as `calibration`; writes the schemas, channels and the once-per-trial
     /// messages (`/scene`, `/smocap/subject`).
     pub fn create(
         out: &Path,
         ctx: &'a Context,
-        name: &str,
         trial: &'a MarkerTrial,
         calibration: &Calibration,
         names: &TrialNames,
@@ -272,7 +269,6 @@ impl<'a> TrialWriter<'a> {
         let mut tw = TrialWriter {
             ctx,
             trial,
-            cols: crate::pipeline::trial::match_markers(ctx, name, trial).map(|m| m.columns).unwrap_or_default(),
             w: None,
             tmp: tmp.clone(),
             out: out.to_path_buf(),
@@ -444,8 +440,8 @@ impl<'a> TrialWriter<'a> {
         self.cloud.data.clear();
         let (mut sq, mut n) = (0.0, 0u32);
         for m in 0..model.markers.len() {
-            let obs = self.cols.get(m).copied().flatten().and_then(|c| trial.position(f, c));
-            let o = obs.unwrap_or([f64::NAN; 3]);
+            let obs = fr.observed.get(3 * m..3 * m + 3).filter(|p| p.iter().all(|v| v.is_finite()));
+            let o = obs.map_or([f64::NAN; 3], |p| [p[0], p[1], p[2]]);
             for v in o {
                 self.cloud.data.extend_from_slice(&(v as f32).to_le_bytes());
             }

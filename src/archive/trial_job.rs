@@ -9,10 +9,10 @@
 
 use super::config::Dataset;
 use super::mcap_out::{McapOutError, RunInfo, TrialNames, TrialWriter, WriterOptions};
-use crate::io::MarkerTrial;
-use crate::pipeline::convention::InputOptions;
+use crate::io::MarkerFile;
+use crate::pipeline::convention::{conform_trial, decide_conventions, Conform, InputOptions};
+use crate::pipeline::frames::{FileFrames, TrialFrames};
 use crate::pipeline::stats::P50P90;
-use crate::pipeline::subject::read_trial;
 use crate::pipeline::trial::SinkError;
 use crate::pipeline::verdict::{Judge, Verdict};
 use crate::pipeline::{solve_trial_streaming, Context, SolvedFrame};
@@ -31,12 +31,15 @@ pub struct Calibrated {
     pub scaled_model: Option<Vec<u8>>,
 }
 
-/// zstd level of the scaled-model attachment, compressed once per subject: 9 (on gait2354's
-/// 404 kB `.osim`: 13.98 kB in 15 ms; level 19: 13.61 kB in 105 ms).
-const MODEL_ZSTD_LEVEL: i32 = 9;
+/// zstd level of the scaled-model attachment, compressed once per subject: 3. On gait2354's
+/// 404 kB `.osim` (zstd 1.5 CLI): level 3 12.2 kB, 9 10.7 kB, 19 ≈ 10.5 kB; level 9's set-up alone
+/// (tables cleared) was 6 % of converting that 151-frame trial in `perf`, for 10 bytes a frame.
+const MODEL_ZSTD_LEVEL: i32 = 3;
 
 /// Frames in flight between the solver and the writer thread of one trial.
 pub const QUEUE_FRAMES: usize = 256;
+/// Frames handed to the writer thread at a time.
+const BATCH_FRAMES: usize = 32;
 
 /// `text` compressed with zstd (for the scaled-model attachment); `None` if compression fails.
 pub fn compress_model(text: &str) -> Option<Vec<u8>> {
@@ -50,16 +53,39 @@ impl Calibrated {
     }
 }
 
-/// Reads a trial for dataset `d` into the model's conventions, with the dataset's rate override.
-pub fn read_for(d: &Dataset, ctx: &Context, path: &Path, input: &InputOptions) -> Result<MarkerTrial, String> {
-    let (mut t, _) = read_trial(ctx, path, input).map_err(|e| e.to_string())?;
+/// Frames read at a time from a trial longer than this (shorter trials are held whole): what a
+/// trial holds while it is converted is bounded by it, whatever the trial's length. The result
+/// does not depend on it. 4096 frames of 53 markers hold 5.2 MB of positions.
+pub const WINDOW_FRAMES: usize = 4096;
+
+/// Opens a trial for dataset `d` in the model's conventions, with the dataset's rate override:
+/// held whole when it has at most `window` frames, else read `window` frames at a time.
+pub fn open_for(
+    d: &Dataset,
+    ctx: &Context,
+    path: &Path,
+    input: &InputOptions,
+    window: usize,
+) -> Result<Box<dyn TrialFrames>, String> {
+    let file = MarkerFile::open(path, window).map_err(|e| e.to_string())?;
+    if file.held() {
+        let mut t = file.trial;
+        conform_trial(ctx, &mut t, input);
+        if let Some(r) = d.rate {
+            t.set_rate(r);
+        }
+        if let Some(w) = crate::pipeline::verdict::mask_implausible(&mut t) {
+            t.warnings.push(w);
+        }
+        return Ok(Box::new(t));
+    }
+    let mut header = file.trial.clone();
+    let raw = FileFrames::new(file, header.clone(), Conform::default(), f64::INFINITY, window);
+    let (_, conform) = decide_conventions(ctx, &raw, input);
     if let Some(r) = d.rate {
-        t.set_rate(r);
+        header.set_rate(r);
     }
-    if let Some(w) = crate::pipeline::verdict::mask_implausible(&mut t) {
-        t.warnings.push(w);
-    }
-    Ok(t)
+    Ok(Box::new(raw.reconform(header, conform, crate::pipeline::verdict::MAX_COORDINATE_M)))
 }
 
 /// What one converted trial yields for the summary.
@@ -80,7 +106,7 @@ pub struct Solved {
 pub fn solve_and_write(
     out: &Path,
     name: &str,
-    trial: &MarkerTrial,
+    trial: &dyn TrialFrames,
     cal: &Calibrated,
     run: &RunInfo,
     opt: &WriterOptions,
@@ -93,20 +119,24 @@ pub fn solve_and_write(
     let field = |k: &str| run.get(k).cloned().unwrap_or_default();
     let names = TrialNames { dataset: field("dataset"), subject: field("subject"), trial: field("trial") };
     let mut writer =
-        TrialWriter::create(out, ctx, name, trial, &cal.calibration, &names, opt).map_err(|e| e.to_string())?;
-    let n = trial.n_frames();
+        TrialWriter::create(out, ctx, trial.header(), &cal.calibration, &names, opt).map_err(|e| e.to_string())?;
+    let n = trial.header().n_frames();
     let (mut ms, mut it, mut rmse, mut secs) =
         (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n), 0.0);
     let mut judge = Judge::default();
     let (solved, written) = std::thread::scope(|scope| {
-        let (tx, rx) = std::sync::mpsc::sync_channel::<SolvedFrame>(QUEUE_FRAMES);
+        // Frames go over in batches of BATCH_FRAMES: one wake-up of the writer per batch, not
+        // per frame (per-frame hand-over cost 7 % of a short trial's conversion in `perf`).
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<SolvedFrame>>(QUEUE_FRAMES / BATCH_FRAMES);
         let writing = std::thread::Builder::new()
             .name("smocap-writer".into())
             .spawn_scoped(scope, move || -> Result<TrialWriter<'_>, (usize, McapOutError)> {
-                for f in rx {
-                    writer.frame(&f).map_err(|e| (f.index, e))?;
+                for batch in rx {
+                    for f in &batch {
+                        writer.frame(f).map_err(|e| (f.index, e))?;
+                    }
                     if let Some(c) = frames_done {
-                        c.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        c.fetch_add(batch.len() as u64, std::sync::atomic::Ordering::Relaxed);
                     }
                 }
                 Ok(writer)
@@ -116,6 +146,7 @@ pub fn solve_and_write(
             Ok(w) => w,
             Err(e) => return (Err(e), None),
         };
+        let mut batch = Vec::with_capacity(BATCH_FRAMES);
         let mut sink = |f: SolvedFrame| -> Result<(), SinkError> {
             judge.frame(f.index, &f.proxies, &f.stats, f.bridged);
             if judge.nonfinite().is_some() {
@@ -125,12 +156,22 @@ pub fn solve_and_write(
             ms.push(f.seconds * 1e3);
             it.push(f.stats.iterations as f64);
             rmse.push(f.stats.rmse_m * 1e3);
-            // Fails only when the writer stopped, whose own error is the one reported.
-            tx.send(f).map_err(|_| "the writer stopped".into())
+            batch.push(f);
+            if batch.len() == BATCH_FRAMES {
+                let full = std::mem::replace(&mut batch, Vec::with_capacity(BATCH_FRAMES));
+                // Fails only when the writer stopped, whose own error is the one reported.
+                tx.send(full).map_err(|_| "the writer stopped")?;
+            }
+            Ok(())
         };
-        let solved = solve_trial_streaming(ctx, name, trial, &cal.calibration, 1, 1, None, &mut sink);
+        let mut solved =
+            solve_trial_streaming(ctx, name, trial, &cal.calibration, 1, 1, None, &mut sink).map_err(|e| e.to_string());
+        drop(sink);
+        if solved.is_ok() && !batch.is_empty() && tx.send(batch).is_err() {
+            solved = Err("the writer stopped".into());
+        }
         drop(tx);
-        (solved.map_err(|e| e.to_string()), Some(writing.join()))
+        (solved, Some(writing.join()))
     });
     let writer = match written {
         Some(Ok(Ok(w))) => w,

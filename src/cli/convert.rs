@@ -58,6 +58,12 @@ pub struct ConvertArgs {
     /// Exit 0 when no trial is found (by default a run that finds nothing to do exits 1).
     #[arg(long)]
     pub allow_empty: bool,
+    /// Trials longer than this many frames are read from their files a window of this many
+    /// frames at a time, so that memory does not grow with a trial's length (shorter trials
+    /// are read whole). The results do not depend on it.
+    #[arg(long, default_value_t = crate::archive::trial_job::WINDOW_FRAMES, value_name = "FRAMES",
+        value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    pub window_frames: usize,
 }
 
 fn parse_epoch(s: &str) -> Result<u64, String> {
@@ -83,6 +89,7 @@ pub fn run(a: ConvertArgs) -> anyhow::Result<u8> {
             timings: a.timings,
             ..WriterOptions::default()
         },
+        window_frames: a.window_frames,
     };
     let every = Duration::try_from_secs_f64(a.progress_every)
         .ok()

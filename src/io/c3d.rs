@@ -37,9 +37,111 @@ pub enum C3dError {
 
 /// Reads a C3D file; positions in metres, in the file's lab frame.
 pub fn read_c3d(path: &Path) -> Result<MarkerTrial, C3dError> {
+    scan_c3d(path, usize::MAX).map(|(t, _)| t)
+}
+
+/// Where a C3D file keeps its point frames, to read them on demand ([`C3dFrames::read`]).
+#[derive(Clone, Debug)]
+pub struct C3dFrames {
+    file: String,
+    path: std::path::PathBuf,
+    proc: params::Proc,
+    /// Byte offset of frame 0 and bytes per frame.
+    data_off: u64,
+    stride: usize,
+    n_points: usize,
+    n_frames: usize,
+    /// Float frames (`POINT:SCALE` < 0), else int16 times `scale`.
+    is_float: bool,
+    scale: f64,
+    per_m: f64,
+}
+
+/// Reads a C3D file as [`read_c3d`] does, a block of frames at a time (the file is never held
+/// whole), holding the positions only when it has at most `keep` frames (otherwise `positions`
+/// is empty and frames are read on demand through the returned [`C3dFrames`]).
+pub fn scan_c3d(path: &Path, keep: usize) -> Result<(MarkerTrial, C3dFrames), C3dError> {
+    use std::io::{Read, Seek};
     let file = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| C3dError::Io { file: file.clone(), source })?;
-    parse_c3d(&bytes, &file)
+    let io = |source| C3dError::Io { file: file.clone(), source };
+    let mut f = std::fs::File::open(path).map_err(io)?;
+    let len = f.metadata().map_err(io)?.len();
+    // The header and parameter section: a prefix that grows until the parameters parse (the
+    // last try reads the whole file, so errors are as for the whole file).
+    let mut want = (64u64 << 10).min(len);
+    let (mut trial, frames) = loop {
+        let mut prefix = vec![0u8; want as usize];
+        f.seek(std::io::SeekFrom::Start(0)).map_err(io)?;
+        f.read_exact(&mut prefix).map_err(io)?;
+        match layout(&prefix, len, &file) {
+            Err(C3dError::Truncated { .. } | C3dError::BadParameterPointer { .. }) if want < len => {
+                want = want.saturating_mul(4).min(len);
+            }
+            other => break other?,
+        }
+    };
+    let mut frames = frames;
+    frames.path = path.to_path_buf();
+    let n = frames.n_frames;
+    if n <= keep {
+        trial.positions = frames.read(0..n)?;
+    }
+    Ok((trial, frames))
+}
+
+impl C3dFrames {
+    /// Frames in the file.
+    pub fn n_frames(&self) -> usize {
+        self.n_frames
+    }
+
+    /// Positions of frames `range` (metres, frame-major as [`MarkerTrial::positions`]), read
+    /// from the file a block at a time.
+    pub fn read(&self, range: std::ops::Range<usize>) -> Result<Vec<f64>, C3dError> {
+        use std::io::{Read, Seek};
+        let io = |source| C3dError::Io { file: self.file.clone(), source };
+        let range = range.start.min(self.n_frames)..range.end.min(self.n_frames);
+        let mut out = Vec::with_capacity(range.len() * self.n_points * 3);
+        if range.is_empty() {
+            return Ok(out);
+        }
+        let mut f = std::fs::File::open(&self.path).map_err(io)?;
+        f.seek(std::io::SeekFrom::Start(self.data_off + (range.start * self.stride) as u64)).map_err(io)?;
+        let per_block = ((1usize << 20) / self.stride.max(1)).max(1);
+        let mut buf = Vec::new();
+        let mut at = range.start;
+        while at < range.end {
+            let k = per_block.min(range.end - at);
+            buf.resize(k * self.stride, 0);
+            f.read_exact(&mut buf).map_err(io)?;
+            self.decode(&buf, &mut out);
+            at += k;
+        }
+        Ok(out)
+    }
+
+    /// Appends the positions of the whole frames in `bytes`.
+    fn decode(&self, bytes: &[u8], out: &mut Vec<f64>) {
+        let proc = self.proc;
+        for frame in bytes.chunks_exact(self.stride.max(1)) {
+            for p in 0..self.n_points {
+                let (xyz, valid) = if self.is_float {
+                    let w = &frame[p * 16..p * 16 + 16];
+                    let v = [0, 4, 8, 12].map(|o| f64::from(proc.f32(&w[o..o + 4])));
+                    ([v[0], v[1], v[2]], v[3] >= 0.0)
+                } else {
+                    let w = &frame[p * 8..p * 8 + 8];
+                    let v = [0, 2, 4, 6].map(|o| proc.i16(&w[o..o + 2]));
+                    ([0, 1, 2].map(|a| f64::from(v[a]) * self.scale), v[3] >= 0)
+                };
+                if valid && xyz.iter().all(|v| v.is_finite()) {
+                    out.extend(xyz.map(|v| v / self.per_m));
+                } else {
+                    out.extend([f64::NAN; 3]);
+                }
+            }
+        }
+    }
 }
 
 /// Where the header keeps each field (byte offsets of 16-bit words and floats).
@@ -55,11 +157,20 @@ mod hdr {
 
 /// Parses the bytes of a C3D file; `name_for_errors` names the source in errors.
 pub fn parse_c3d(bytes: &[u8], name_for_errors: &str) -> Result<MarkerTrial, C3dError> {
+    let (mut trial, frames) = layout(bytes, bytes.len() as u64, name_for_errors)?;
+    let start = frames.data_off as usize;
+    frames.decode(&bytes[start..start + frames.n_frames * frames.stride], &mut trial.positions);
+    Ok(trial)
+}
+
+/// The trial without its positions and where its frames are, from the file's first bytes
+/// (`bytes`, at least the header and the parameter section) and its length `len`.
+fn layout(bytes: &[u8], len: u64, name_for_errors: &str) -> Result<(MarkerTrial, C3dFrames), C3dError> {
     let file = name_for_errors.to_string();
     let bad = |what: String| C3dError::BadValue { file: file.clone(), what };
     if bytes.len() < 512 {
         let what = "the 512-byte header".to_string();
-        return Err(C3dError::Truncated { file, what, needed: 512, len: bytes.len() });
+        return Err(C3dError::Truncated { file, what, needed: 512, len: len as usize });
     }
     let mut warnings = Vec::new();
     if bytes[1] != 0x50 {
@@ -140,43 +251,36 @@ pub fn parse_c3d(bytes: &[u8], name_for_errors: &str) -> Result<MarkerTrial, C3d
     let word = if is_float { 4u64 } else { 2 };
     let stride = (n_points as u64 * 4).saturating_add(analog_words).saturating_mul(word);
     let needed = data_off.saturating_add(stride.saturating_mul(n_frames));
-    let len = bytes.len();
-    if needed > len as u64 {
+    if needed > len {
         let what = format!(
             "{n_frames} frames of {n_points} points and {analog_words} analog samples from block {start_block}"
         );
-        return Err(C3dError::Truncated { file, what, needed, len });
+        return Err(C3dError::Truncated { file, what, needed, len: len as usize });
     }
-    if stride == 0 && n_frames > len as u64 {
+    if stride == 0 && n_frames > len {
         return Err(bad(format!("{n_frames} frames without points or analog data")));
     }
     let (n_frames, data_off, stride) = (n_frames as usize, data_off as usize, stride as usize);
 
     let labels = point_labels(&params, n_points, &mut warnings);
-    let mut positions = Vec::with_capacity(n_frames * n_points * 3);
-    for f in 0..n_frames {
-        let frame = &bytes[data_off + f * stride..data_off + (f + 1) * stride];
-        for p in 0..n_points {
-            let (xyz, valid) = if is_float {
-                let w = &frame[p * 16..p * 16 + 16];
-                let v = [0, 4, 8, 12].map(|o| f64::from(proc.f32(&w[o..o + 4])));
-                ([v[0], v[1], v[2]], v[3] >= 0.0)
-            } else {
-                let w = &frame[p * 8..p * 8 + 8];
-                let v = [0, 2, 4, 6].map(|o| proc.i16(&w[o..o + 2]));
-                ([0, 1, 2].map(|a| f64::from(v[a]) * scale), v[3] >= 0)
-            };
-            if valid && xyz.iter().all(|v| v.is_finite()) {
-                positions.extend(xyz.map(|v| v / per_m));
-            } else {
-                positions.extend([f64::NAN; 3]);
-            }
-        }
-    }
     let frame_numbers = (0..n_frames).map(|i| (first_frame + i as u64) as i64).collect();
     let times = (0..n_frames).map(|i| i as f64 / rate_hz).collect();
     warnings.extend(params.warnings);
-    Ok(MarkerTrial { labels, rate_hz, times, frame_numbers, positions, source_units: units, warnings })
+    let trial =
+        MarkerTrial { labels, rate_hz, times, frame_numbers, positions: Vec::new(), source_units: units, warnings };
+    let frames = C3dFrames {
+        path: file.clone().into(),
+        file,
+        proc,
+        data_off: data_off as u64,
+        stride,
+        n_points,
+        n_frames,
+        is_float,
+        scale,
+        per_m,
+    };
+    Ok((trial, frames))
 }
 
 /// `POINT:LABELS`, `LABELS2`, `LABELS3`, ... concatenated, cut or padded (`POINT<i>`,

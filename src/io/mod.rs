@@ -7,10 +7,12 @@ pub mod gravity;
 pub mod markers;
 pub mod mjcf;
 pub mod osim;
+pub mod source;
 pub mod sto;
 pub mod trc;
 
 pub use markers::MarkerTrial;
+pub use source::MarkerFile;
 
 use std::path::Path;
 
@@ -31,7 +33,7 @@ pub const MARKER_FORMATS: &str = "trc, c3d";
 /// Reads a marker trial, choosing the reader by the file's extension (case-insensitive).
 pub fn read_markers(path: &Path) -> Result<MarkerTrial, MarkerFileError> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    let mut t = match ext.as_str() {
+    let mut t: MarkerTrial = match ext.as_str() {
         "trc" => trc::read_trc(path)?,
         "c3d" => c3d::read_c3d(path)?,
         _ => Err(MarkerFileError::Unsupported {
@@ -40,9 +42,14 @@ pub fn read_markers(path: &Path) -> Result<MarkerTrial, MarkerFileError> {
             supported: MARKER_FORMATS,
         })?,
     };
-    // Absurd values (whatever the units) are gaps before anything looks at the data.
-    if let Some(w) = crate::pipeline::verdict::mask_beyond(&mut t, crate::pipeline::verdict::ABSURD_COORDINATE_M) {
+    mask_absurd(&mut t);
+    Ok(t)
+}
+
+/// Absurd values (whatever the units) are gaps before anything looks at the data (with a
+/// warning saying how many).
+fn mask_absurd(t: &mut MarkerTrial) {
+    if let Some(w) = crate::pipeline::verdict::mask_beyond(t, crate::pipeline::verdict::ABSURD_COORDINATE_M) {
         t.warnings.push(w);
     }
-    Ok(t)
 }

@@ -6,6 +6,7 @@
 //! Positions are converted to metres on reading. Empty cells, `NaN` and missing
 //! trailing cells are gaps; if any axis of a marker is missing the whole marker is.
 
+use std::io::{BufRead, BufReader};
 use std::path::Path;
 
 use super::markers::{units_to_metres, MarkerTrial};
@@ -47,15 +48,113 @@ impl TrcError {
 }
 
 /// Reads a TRC file; positions in metres. Non-UTF-8 bytes are replaced (with a warning).
+///
+/// The file is read a line at a time: what is held is the trial's arrays, not its text.
 pub fn read_trc(path: &Path) -> Result<MarkerTrial, TrcError> {
+    scan_trc(path, usize::MAX).map(|(t, _)| t)
+}
+
+/// Where each frame's row starts in a TRC file, to read frames again on demand
+/// ([`TrcRows::read`]).
+#[derive(Clone, Debug)]
+pub struct TrcRows {
+    file: String,
+    path: std::path::PathBuf,
+    /// Byte offset and 1-based line number of each frame's row.
+    rows: Vec<(u64, u32)>,
+    /// Line breaks: `\n` (a trailing `\r` dropped) or `\r` alone.
+    eol: u8,
+    per_m: f64,
+    n_markers: usize,
+}
+
+/// Reads a TRC file as [`read_trc`] does, holding the positions only when the file has at most
+/// `keep` frames (otherwise `positions` is empty and frames are read on demand through the
+/// returned [`TrcRows`]); every row is parsed, so errors are found here either way.
+pub fn scan_trc(path: &Path, keep: usize) -> Result<(MarkerTrial, TrcRows), TrcError> {
     let file = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| TrcError::Io { file: file.clone(), source })?;
-    let text = String::from_utf8_lossy(&bytes);
-    let mut trial = parse_trc(&text, &file)?;
-    if matches!(text, std::borrow::Cow::Owned(_)) {
+    let io = |source| TrcError::Io { file: file.clone(), source };
+    let f = std::fs::File::open(path).map_err(io)?;
+    let size = f.metadata().map_or(0, |m| m.len());
+    let mut r = BufReader::with_capacity(1 << 16, f);
+    // Classic Mac line endings (CR only): each CR ends a line (decided on the first block).
+    let first = r.fill_buf().map_err(io)?;
+    let eol = if !first.contains(&b'\n') && first.contains(&b'\r') { b'\r' } else { b'\n' };
+    let mut buf = Vec::new();
+    let mut lossy = false;
+    let mut p = Parser::new(&file, size);
+    p.keep = keep;
+    let mut at = 0u64;
+    loop {
+        buf.clear();
+        let n = r.read_until(eol, &mut buf).map_err(io)?;
+        if n == 0 {
+            break;
+        }
+        p.offset = at;
+        at += n as u64;
+        let line = String::from_utf8_lossy(trim_eol(&mut buf, eol));
+        lossy |= matches!(line, std::borrow::Cow::Owned(_));
+        p.line(&line)?;
+    }
+    let per_m = p.header.as_ref().map_or(1.0, |h| h.per_m);
+    let rows = std::mem::take(&mut p.offsets);
+    let mut trial = p.finish()?;
+    if lossy {
         trial.warnings.push("file is not valid UTF-8; bad bytes replaced".into());
     }
-    Ok(trial)
+    let n_markers = trial.n_markers();
+    Ok((trial, TrcRows { file, path: path.to_path_buf(), rows, eol, per_m, n_markers }))
+}
+
+/// `buf` without its line break.
+fn trim_eol(buf: &mut Vec<u8>, eol: u8) -> &[u8] {
+    if buf.last() == Some(&eol) {
+        buf.pop();
+    }
+    if eol == b'\n' && buf.last() == Some(&b'\r') {
+        buf.pop();
+    }
+    buf
+}
+
+impl TrcRows {
+    /// Frames in the file.
+    pub fn n_frames(&self) -> usize {
+        self.rows.len()
+    }
+
+    /// Positions of frames `range` (metres, frame-major as [`MarkerTrial::positions`]), read
+    /// again from the file.
+    pub fn read(&self, range: std::ops::Range<usize>) -> Result<Vec<f64>, TrcError> {
+        let io = |source| TrcError::Io { file: self.file.clone(), source };
+        let range = range.start.min(self.rows.len())..range.end.min(self.rows.len());
+        let mut p = Parser::new(&self.file, 0);
+        p.header = Some(Header { per_m: self.per_m, first_data: 0, num_frames: None });
+        p.trial.labels = vec![String::new(); self.n_markers];
+        p.trial.positions.reserve_exact(range.len() * 3 * self.n_markers);
+        let Some(&(start, _)) = self.rows.get(range.start) else { return Ok(Vec::new()) };
+        let mut f = std::fs::File::open(&self.path).map_err(io)?;
+        std::io::Seek::seek(&mut f, std::io::SeekFrom::Start(start)).map_err(io)?;
+        let mut r = BufReader::with_capacity(1 << 16, f);
+        let mut buf = Vec::new();
+        for &(_, line) in &self.rows[range.clone()] {
+            // Rows are the non-empty lines: skip empty ones between them.
+            loop {
+                buf.clear();
+                if r.read_until(self.eol, &mut buf).map_err(io)? == 0 {
+                    return Err(TrcError::NoData { file: self.file.clone(), line: line as usize });
+                }
+                let text = String::from_utf8_lossy(trim_eol(&mut buf, self.eol));
+                if text.trim().is_empty() {
+                    continue;
+                }
+                p.row(line as usize, &text)?;
+                break;
+            }
+        }
+        Ok(p.trial.positions)
+    }
 }
 
 /// At most 40 characters of `s`, for error messages.
@@ -129,94 +228,183 @@ fn parse_frame(s: &str) -> Option<i64> {
 
 /// Parses TRC text; `name_for_errors` names the source in errors. Positions in metres.
 pub fn parse_trc(text: &str, name_for_errors: &str) -> Result<MarkerTrial, TrcError> {
-    let file = name_for_errors.to_string();
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let mut p = Parser::new(name_for_errors, text.len() as u64);
     // Classic Mac line endings (CR only): each CR ends a line.
-    let lines: Vec<&str> =
-        if text.contains('\r') && !text.contains('\n') { text.split('\r').collect() } else { text.lines().collect() };
-    let missing =
-        |line: usize, expected: &str| TrcError::MissingHeader { file: file.clone(), line, expected: expected.into() };
-    let mut warnings = Vec::new();
-
-    if !lines.first().is_some_and(|l| l.trim_start().starts_with("PathFileType")) {
-        return Err(missing(1, "a `PathFileType` line"));
+    if text.contains('\r') && !text.contains('\n') {
+        text.split('\r').try_for_each(|l| p.line(l))?;
+    } else {
+        text.lines().try_for_each(|l| p.line(l))?;
     }
-    let names_line = lines.get(1).ok_or_else(|| missing(2, "header field names (DataRate ... Units ...)"))?;
-    let values_line = lines.get(2).ok_or_else(|| missing(3, "header field values"))?;
-    let pairs = header_pairs(names_line, values_line, &mut warnings);
-    let field = |name: &str| pairs.iter().find(|(n, _)| n.eq_ignore_ascii_case(name)).map(|(_, v)| v.as_str());
-    let has_name = |name: &str| names_line.split_whitespace().any(|n| n.eq_ignore_ascii_case(name));
+    p.finish()
+}
 
-    let (rate_name, rate_str) = match (field("DataRate"), field("CameraRate")) {
-        (Some(v), _) => ("DataRate", v),
-        (None, Some(v)) if !has_name("DataRate") => {
-            warnings.push("no DataRate field; using CameraRate".into());
-            ("CameraRate", v)
+/// What the header (lines 1–5) says.
+struct Header {
+    per_m: f64,
+    /// 0-based index of the first data line (4 when line 5 is data, else 5).
+    first_data: usize,
+    num_frames: Option<f64>,
+}
+
+/// A TRC parser fed one line at a time (without its line break), so that a file is parsed
+/// without holding its text.
+struct Parser {
+    file: String,
+    /// Bytes of the input (to reserve the arrays once).
+    size: u64,
+    /// Lines fed so far.
+    lines: usize,
+    /// The first five lines, until the header is read.
+    head: Vec<String>,
+    header: Option<Header>,
+    trial: MarkerTrial,
+    warnings: Vec<String>,
+    time_warned: bool,
+    /// Bytes fed so far.
+    fed: u64,
+    /// Frames whose positions are held (beyond it, rows are parsed and checked only).
+    keep: usize,
+    /// Byte offset of the line being fed (set by the caller), and that of each frame's row.
+    offset: u64,
+    offsets: Vec<(u64, u32)>,
+}
+
+impl Parser {
+    fn new(file: &str, size: u64) -> Parser {
+        Parser {
+            file: file.to_string(),
+            size,
+            lines: 0,
+            head: Vec::new(),
+            header: None,
+            trial: MarkerTrial::default(),
+            warnings: Vec::new(),
+            time_warned: false,
+            fed: 0,
+            keep: usize::MAX,
+            offset: 0,
+            offsets: Vec::new(),
         }
-        _ if has_name("DataRate") => return Err(missing(3, "a value for DataRate")),
-        _ => return Err(missing(2, "a DataRate field")),
-    };
-    let rate_hz = rate_str.parse::<f64>().ok().filter(|r| r.is_finite() && *r > 0.0).ok_or_else(|| {
-        TrcError::BadHeaderValue { file: file.clone(), line: 3, field: rate_name.into(), value: clip(rate_str) }
-    })?;
-    let units = match field("Units") {
-        Some(u) => u.to_string(),
-        None if has_name("Units") => return Err(missing(3, "a value for Units")),
-        None => return Err(missing(2, "a Units field")),
-    };
-    let scale = units_to_metres(&units).ok_or_else(|| TrcError::UnknownUnits {
-        file: file.clone(),
-        line: 3,
-        units: clip(&units),
-    })?;
+    }
 
-    let label_line = lines.get(3).ok_or_else(|| missing(4, "the `Frame# Time <labels>` line"))?;
-    if !label_line.trim_start().to_ascii_lowercase().starts_with("frame") {
-        return Err(missing(4, "the `Frame# Time <labels>` line"));
-    }
-    let labels = labels_of(label_line, &mut warnings);
-    let nm = labels.len();
-    if nm == 0 {
-        warnings.push("no marker labels".into());
-    }
-    if let Some(n) = field("NumMarkers").and_then(|v| v.parse::<f64>().ok()) {
-        if n != nm as f64 {
-            warnings.push(format!("NumMarkers says {n} but line 4 has {nm} labels; using the labels"));
+    fn line(&mut self, line: &str) -> Result<(), TrcError> {
+        self.lines += 1;
+        self.fed += line.len() as u64 + 1;
+        let line = if self.lines == 1 { line.strip_prefix('\u{feff}').unwrap_or(line) } else { line };
+        match &self.header {
+            Some(h) if self.lines > h.first_data => return self.row(self.lines, line),
+            Some(_) => return Ok(()),
+            None => self.head.push(line.to_string()),
         }
+        if self.head.len() == 5 {
+            self.read_header()?;
+            // Line 5 read as data.
+            if self.header.as_ref().is_some_and(|h| h.first_data == 4) {
+                let l5 = std::mem::take(&mut self.head[4]);
+                self.row(5, &l5)?;
+            }
+            self.head = Vec::new();
+        }
+        Ok(())
     }
 
-    // Line 5 is normally `X1 Y1 Z1 ...`; if it already looks like data, read it as data.
-    let mut first_data = 5;
-    if let Some(l5) = lines.get(4) {
-        let c = cells(l5.trim());
-        if c.first().is_some_and(|s| parse_frame(s).is_some()) {
-            warnings.push("line 5 has no X1 Y1 Z1 coordinate names; read as data".into());
-            first_data = 4;
-        } else {
-            first_data = 5;
-            let n_axes = c.iter().filter(|s| !s.is_empty()).count();
-            if n_axes != 3 * nm && !l5.trim().is_empty() {
-                warnings.push(format!("line 5 names {n_axes} coordinates for {nm} markers"));
+    /// Reads the header from the (up to five) lines in `head`.
+    fn read_header(&mut self) -> Result<(), TrcError> {
+        let file = self.file.clone();
+        let lines = &self.head;
+        let missing = |line: usize, expected: &str| TrcError::MissingHeader {
+            file: file.clone(),
+            line,
+            expected: expected.into(),
+        };
+        let warnings = &mut self.warnings;
+        if !lines.first().is_some_and(|l| l.trim_start().starts_with("PathFileType")) {
+            return Err(missing(1, "a `PathFileType` line"));
+        }
+        let names_line = lines.get(1).ok_or_else(|| missing(2, "header field names (DataRate ... Units ...)"))?;
+        let values_line = lines.get(2).ok_or_else(|| missing(3, "header field values"))?;
+        let pairs = header_pairs(names_line, values_line, warnings);
+        let field = |name: &str| pairs.iter().find(|(n, _)| n.eq_ignore_ascii_case(name)).map(|(_, v)| v.as_str());
+        let has_name = |name: &str| names_line.split_whitespace().any(|n| n.eq_ignore_ascii_case(name));
+
+        let (rate_name, rate_str) = match (field("DataRate"), field("CameraRate")) {
+            (Some(v), _) => ("DataRate", v),
+            (None, Some(v)) if !has_name("DataRate") => {
+                warnings.push("no DataRate field; using CameraRate".into());
+                ("CameraRate", v)
+            }
+            _ if has_name("DataRate") => return Err(missing(3, "a value for DataRate")),
+            _ => return Err(missing(2, "a DataRate field")),
+        };
+        let rate_hz = rate_str.parse::<f64>().ok().filter(|r| r.is_finite() && *r > 0.0).ok_or_else(|| {
+            TrcError::BadHeaderValue { file: file.clone(), line: 3, field: rate_name.into(), value: clip(rate_str) }
+        })?;
+        let units = match field("Units") {
+            Some(u) => u.to_string(),
+            None if has_name("Units") => return Err(missing(3, "a value for Units")),
+            None => return Err(missing(2, "a Units field")),
+        };
+        let scale = units_to_metres(&units).ok_or_else(|| TrcError::UnknownUnits {
+            file: file.clone(),
+            line: 3,
+            units: clip(&units),
+        })?;
+
+        let label_line = lines.get(3).ok_or_else(|| missing(4, "the `Frame# Time <labels>` line"))?;
+        if !label_line.trim_start().to_ascii_lowercase().starts_with("frame") {
+            return Err(missing(4, "the `Frame# Time <labels>` line"));
+        }
+        let labels = labels_of(label_line, warnings);
+        let nm = labels.len();
+        if nm == 0 {
+            warnings.push("no marker labels".into());
+        }
+        if let Some(n) = field("NumMarkers").and_then(|v| v.parse::<f64>().ok()) {
+            if n != nm as f64 {
+                warnings.push(format!("NumMarkers says {n} but line 4 has {nm} labels; using the labels"));
             }
         }
+
+        // Line 5 is normally `X1 Y1 Z1 ...`; if it already looks like data, read it as data.
+        let mut first_data = 5;
+        if let Some(l5) = lines.get(4) {
+            let c = cells(l5.trim());
+            if c.first().is_some_and(|s| parse_frame(s).is_some()) {
+                warnings.push("line 5 has no X1 Y1 Z1 coordinate names; read as data".into());
+                first_data = 4;
+            } else {
+                let n_axes = c.iter().filter(|s| !s.is_empty()).count();
+                if n_axes != 3 * nm && !l5.trim().is_empty() {
+                    warnings.push(format!("line 5 names {n_axes} coordinates for {nm} markers"));
+                }
+            }
+        }
+        let num_frames = field("NumFrames").and_then(|v| v.parse::<f64>().ok());
+        self.trial = MarkerTrial { labels, rate_hz, source_units: units, ..MarkerTrial::default() };
+        self.header = Some(Header { per_m: per_metre(scale), first_data, num_frames });
+        Ok(())
     }
 
-    let mut trial = MarkerTrial { labels, rate_hz, source_units: units, ..MarkerTrial::default() };
-    // At most one frame per remaining line: reserved once, so the arrays neither overshoot by
-    // doubling nor hold two copies while growing (what a row allocates anyway: 3 values per label).
-    let rows = lines.len().saturating_sub(first_data);
-    trial.positions.reserve_exact(rows.saturating_mul(3 * nm));
-    trial.times.reserve_exact(rows);
-    trial.frame_numbers.reserve_exact(rows);
-    let mut time_warned = false;
-    let per_m = per_metre(scale);
-    for (idx, raw) in lines.iter().enumerate().skip(first_data) {
-        let line = idx + 1;
+    /// Parses data line `line` (1-based).
+    fn row(&mut self, line: usize, raw: &str) -> Result<(), TrcError> {
         let row = raw.trim_end();
         if row.trim().is_empty() {
-            continue;
+            return Ok(());
+        }
+        let per_m = self.header.as_ref().map_or(1.0, |h| h.per_m);
+        let trial = &mut self.trial;
+        let nm = trial.labels.len();
+        if trial.times.is_empty() && self.keep > 0 {
+            // At most one frame per remaining line of this length: reserved once, so the arrays
+            // neither overshoot by doubling nor hold two copies while growing.
+            let rows = (self.size.saturating_sub(self.fed) / (raw.len() as u64 + 1)) as usize + 1;
+            let rows = (rows + rows / 16 + 16).min(self.keep);
+            trial.positions.reserve_exact(rows.saturating_mul(3 * nm));
+            trial.times.reserve_exact(rows);
+            trial.frame_numbers.reserve_exact(rows);
         }
         let c = cells(row);
+        let file = &self.file;
         let non_numeric =
             |column: usize, value: &str| TrcError::NonNumeric { file: file.clone(), line, column, value: clip(value) };
         if c.len() > 2 + 3 * nm {
@@ -226,9 +414,9 @@ pub fn parse_trc(text: &str, name_for_errors: &str) -> Result<MarkerTrial, TrcEr
         let frame = parse_frame(frame_cell).ok_or_else(|| non_numeric(1, frame_cell))?;
         let time_cell = c.get(1).copied().unwrap_or("");
         let time = time_cell.parse::<f64>().ok().filter(|t| t.is_finite()).ok_or_else(|| non_numeric(2, time_cell))?;
-        if !time_warned && trial.times.last().is_some_and(|&prev| time <= prev) {
-            warnings.push(format!("time does not increase at line {line}"));
-            time_warned = true;
+        if !self.time_warned && trial.times.last().is_some_and(|&prev| time <= prev) {
+            self.warnings.push(format!("time does not increase at line {line}"));
+            self.time_warned = true;
         }
         for m in 0..nm {
             let mut p = [f64::NAN; 3];
@@ -244,21 +432,45 @@ pub fn parse_trc(text: &str, name_for_errors: &str) -> Result<MarkerTrial, TrcEr
             if p.iter().any(|v| v.is_nan()) {
                 p = [f64::NAN; 3];
             }
-            trial.positions.extend_from_slice(&p);
+            if trial.times.len() < self.keep {
+                trial.positions.extend_from_slice(&p);
+            }
         }
+        if trial.times.len() == self.keep {
+            // More frames than are held: none are.
+            trial.positions = Vec::new();
+        }
+        self.offsets.push((self.offset, line as u32));
         trial.frame_numbers.push(frame);
         trial.times.push(time);
+        Ok(())
     }
-    if trial.times.is_empty() {
-        return Err(TrcError::NoData { file, line: lines.len() + 1 });
-    }
-    if let Some(n) = field("NumFrames").and_then(|v| v.parse::<f64>().ok()) {
-        if n != trial.n_frames() as f64 {
-            warnings.push(format!("NumFrames says {n} but {} data rows were read", trial.n_frames()));
+
+    /// The trial, once every line was fed.
+    fn finish(mut self) -> Result<MarkerTrial, TrcError> {
+        if self.header.is_none() {
+            // Fewer than five lines: the header's own checks say what is missing.
+            self.read_header()?;
+            if self.header.as_ref().is_some_and(|h| h.first_data == 4) {
+                let l5 = std::mem::take(&mut self.head[4]);
+                self.row(5, &l5)?;
+            }
         }
+        let mut trial = self.trial;
+        if trial.times.is_empty() {
+            return Err(TrcError::NoData { file: self.file, line: self.lines + 1 });
+        }
+        trial.positions.shrink_to_fit();
+        trial.times.shrink_to_fit();
+        trial.frame_numbers.shrink_to_fit();
+        if let Some(n) = self.header.as_ref().and_then(|h| h.num_frames) {
+            if n != trial.n_frames() as f64 {
+                self.warnings.push(format!("NumFrames says {n} but {} data rows were read", trial.n_frames()));
+            }
+        }
+        trial.warnings = self.warnings;
+        Ok(trial)
     }
-    trial.warnings = warnings;
-    Ok(trial)
 }
 
 /// Writes `trial` as a TRC file with positions in `units` (mm, cm, m, in).

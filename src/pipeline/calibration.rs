@@ -12,6 +12,7 @@
 //! Without registration, step 2 runs on all markers; an OpenSim `MarkerPlacer` (or
 //! `--place-markers`) then moves the unfixed markers as OpenSim does.
 
+use super::frames::{for_each_window, TrialFrames};
 use super::trial::{match_markers, no_match, observations, TrialError};
 use super::Context;
 use crate::io::MarkerTrial;
@@ -19,7 +20,7 @@ use crate::kinematics::assembly::FrameProblem;
 use crate::model::anthropometry::{resolve, stature_ratio, Survey};
 use crate::model::proxy::ProxyKind;
 use crate::model::MarkerClass;
-use crate::solve::calibrate::{finish, initial_state_weighted, track, JointProblem};
+use crate::solve::calibrate::{finish, initial_state_weighted, JointProblem, Tracker};
 use crate::solve::placement::place_markers;
 use crate::solve::prior::{
     measure, Anisotropy, Anthropometric, GlobalTerm, OffsetPrior, PriorReport, ScaleReport, ScaleToward,
@@ -32,9 +33,9 @@ fn observed_count(obs: &[f64], weights: &[f64]) -> usize {
     obs.chunks_exact(3).zip(weights).filter(|(c, &w)| w > 0.0 && c.iter().all(|v| !v.is_nan())).count()
 }
 
-/// Up to `k` frames spread evenly over those with the most observed markers.
-fn calibration_frames(obs: &[f64], weights: &[f64], stride: usize, k: usize, min: usize) -> Vec<usize> {
-    let counts: Vec<usize> = obs.chunks(stride).map(|o| observed_count(o, weights)).collect();
+/// Up to `k` frames spread evenly over those with the most observed markers (`counts`: observed
+/// weighted markers per frame).
+fn calibration_frames(counts: &[usize], k: usize, min: usize) -> Vec<usize> {
     let best = counts.iter().copied().max().unwrap_or(0);
     let good: Vec<usize> = (0..counts.len()).filter(|&f| counts[f] >= min && counts[f] + 2 >= best).collect();
     if good.is_empty() || k == 0 {
@@ -189,10 +190,10 @@ enum Kind {
 /// morphology that fits both (`calibration_frames` from the static trials with their weights,
 /// `calibration_frames_motion` spread over the motion trials with the motion weights). Marker
 /// placement (OpenSim's MarkerPlacer) places on the static frames when there are any.
-pub fn calibrate_subject_with(
+pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     ctx: &Context,
-    statics: &[(&str, &MarkerTrial)],
-    motions: &[(&str, &MarkerTrial)],
+    statics: &[(&str, &T)],
+    motions: &[(&str, &T)],
 ) -> Result<Calibration, TrialError> {
     let started = std::time::Instant::now();
     let settings = &ctx.settings;
@@ -247,30 +248,57 @@ pub fn calibrate_subject_with(
             if kind == Kind::Static { settings.calibration_frames } else { settings.calibration_frames_motion };
         let count = if kind == Kind::Static { statics.len() } else { motions.len() };
         let per_trial = wanted.div_ceil(count.max(1));
-        let map = match_markers(ctx, name, t)?.columns;
+        let header = t.header();
+        let map = match_markers(ctx, name, header)?.columns;
         if map.iter().all(Option::is_none) {
-            return Err(no_match(ctx, name, t));
+            return Err(no_match(ctx, name, header));
         }
         let w1 = first_w(kind);
-        let o = observations(t, &map);
-        units_check(ctx, name, &o, stride, all_w(kind), &p0)?;
-        let chosen = calibration_frames(&o, w1, stride, per_trial, settings.min_markers);
+        // One pass over the trial's windows: observed markers per frame, and the frames the
+        // units check looks at (every (n / 20)th).
+        let n = header.n_frames();
+        let every = (n / 20).max(1);
+        let mut counts = Vec::with_capacity(n);
+        let mut sample = Vec::new();
+        let read = |why: String| TrialError::Read { trial: name.to_string(), why };
+        for_each_window(*t, |first, w| {
+            let o = observations(w, &map);
+            for (f, row) in o.chunks_exact(stride).enumerate() {
+                counts.push(observed_count(row, w1));
+                if (first + f) % every == 0 {
+                    sample.extend_from_slice(row);
+                }
+            }
+        })
+        .map_err(read)?;
+        units_check(ctx, name, &sample, stride, all_w(kind), &p0)?;
+        let chosen = calibration_frames(&counts, per_trial, settings.min_markers);
         let Some(&last) = chosen.last() else { continue };
         // Track from the first frame to the last chosen one so that every chosen frame starts
         // from a pose continuous with the motion (a cold start far into a motion can land in a
         // wrong local minimum).
-        let begin = (0..=last)
-            .find(|&f| observed_count(&o[f * stride..(f + 1) * stride], w1) >= settings.min_markers)
-            .unwrap_or(0);
-        let slices: Vec<&[f64]> = (begin..=last).map(|f| &o[f * stride..(f + 1) * stride]).collect();
+        let begin = (0..=last).find(|&f| counts[f] >= settings.min_markers).unwrap_or(0);
         let template =
             FrameProblem { observed: &[], marker_weights: w1, tracking_ref: &coord_ref, tracking_weights: &coord_w };
-        let tracked = track(&mut solver, &slices, &template, &p0);
-        for f in chosen {
-            pooled.extend_from_slice(&o[f * stride..(f + 1) * stride]);
-            starts.push(tracked[f - begin].clone());
-            kinds.push(kind);
+        let mut tracker = Tracker::new(&mut solver, &p0);
+        let mut next = chosen.iter().copied().peekable();
+        let mut a = begin;
+        while a <= last {
+            let b = a.saturating_add(t.window_frames().max(1)).min(last + 1);
+            let w = t.window(a..b).map_err(read)?;
+            let o = observations(&w, &map);
+            for (i, row) in o.chunks_exact(stride).enumerate() {
+                let p = tracker.step(&mut solver, row, &template);
+                if next.peek() == Some(&(a + i)) {
+                    next.next();
+                    pooled.extend_from_slice(row);
+                    starts.push(p.to_vec());
+                    kinds.push(kind);
+                }
+            }
+            a = b;
         }
+        tracker.end(&mut solver);
     }
     if pooled.is_empty() {
         let trial = statics.iter().chain(motions).map(|(n, _)| *n).collect::<Vec<_>>().join(", ");

@@ -13,6 +13,7 @@
 //! are left as they are and the report says so. The data are then rotated by the smallest proper
 //! rotation (det +1) taking their up onto the model's (e.g. Z-up → Y-up: `(x, y, z) → (x, z, −y)`).
 
+use super::frames::{for_each_window, TrialFrames};
 use super::matching::match_names_with;
 use super::Context;
 use crate::io::markers::units_to_metres;
@@ -119,10 +120,41 @@ const C3D_NO_UNITS: &str = "no POINT:UNITS";
 
 /// Brings `trial` into the model's units and up axis in place; returns what was decided.
 pub fn conform_trial(ctx: &Context, trial: &mut MarkerTrial, opt: &InputOptions) -> InputConventions {
+    let (out, conform) = decide_conventions(ctx, &*trial, opt);
+    conform.apply(trial);
+    out
+}
+
+/// What bringing a trial's positions into the model's conventions does to them.
+#[derive(Clone, Debug, Default)]
+pub struct Conform {
+    /// Positions multiplied by this (units other than the file's).
+    pub factor: Option<f64>,
+    /// Then rotated by this (the data's up axis onto the model's).
+    pub rotation: Option<Matrix3<f64>>,
+}
+
+impl Conform {
+    /// Applies it to `trial`'s positions in place.
+    pub fn apply(&self, trial: &mut MarkerTrial) {
+        if let Some(factor) = self.factor {
+            trial.positions.iter_mut().for_each(|v| *v *= factor);
+        }
+        if let Some(r) = &self.rotation {
+            rotate(trial, r);
+        }
+    }
+}
+
+/// Decides the units and up axis of `trial`'s frames for the model (as [`conform_trial`] does)
+/// without changing them.
+pub fn decide_conventions(ctx: &Context, frames: &dyn TrialFrames, opt: &InputOptions) -> (InputConventions, Conform) {
+    let trial = frames.header();
+    let mut conform = Conform::default();
     let mut out =
         InputConventions { model_up: ctx.up.map(|u| [u.x + 0.0, u.y + 0.0, u.z + 0.0]), ..Default::default() };
     let read_scale = units_to_metres(&trial.source_units).unwrap_or(1e-3);
-    let fit = Fit::new(ctx, trial);
+    let fit = Fit::new(ctx, frames);
     // Units.
     let header_missing = trial.warnings.iter().any(|w| w.starts_with(C3D_NO_UNITS));
     let chosen = if let Some(u) = opt.units {
@@ -153,8 +185,7 @@ pub fn conform_trial(ctx: &Context, trial: &mut MarkerTrial, opt: &InputOptions)
     };
     out.units = trial.source_units.clone();
     if let Some(metres) = chosen.filter(|m| (m / read_scale - 1.0).abs() > 1e-12) {
-        let factor = metres / read_scale;
-        trial.positions.iter_mut().for_each(|v| *v *= factor);
+        conform.factor = Some(metres / read_scale);
         out.units = [Units::Mm, Units::Cm, Units::M]
             .into_iter()
             .find(|u| u.metres() == metres)
@@ -165,7 +196,7 @@ pub fn conform_trial(ctx: &Context, trial: &mut MarkerTrial, opt: &InputOptions)
     // Up axis.
     let Some(model_up) = ctx.up else {
         out.up_source = "the model has no gravity to say which way is up".into();
-        return out;
+        return (out, conform);
     };
     let data_up = if let Some(a) = opt.up {
         out.up_source = "command line".into();
@@ -207,15 +238,15 @@ pub fn conform_trial(ctx: &Context, trial: &mut MarkerTrial, opt: &InputOptions)
             },
         }
     };
-    let Some(data_up) = data_up else { return out };
+    let Some(data_up) = data_up else { return (out, conform) };
     out.up = Some(axis_name(&data_up));
     let r = rotation_between(&data_up, &model_up);
     if (r.matrix() - Matrix3::identity()).abs().max() > 1e-12 {
-        rotate(trial, r.matrix());
+        conform.rotation = Some(*r.matrix());
         let m = r.matrix();
         out.rotation = Some([0, 1, 2].map(|i| [m[(i, 0)], m[(i, 1)], m[(i, 2)]]));
     }
-    out
+    (out, conform)
 }
 
 /// Rigid fits of the default-pose model markers to well-populated frames.
@@ -230,11 +261,13 @@ impl Fit {
     /// Frames fitted at most.
     const FRAMES: usize = 10;
 
-    fn new(ctx: &Context, trial: &MarkerTrial) -> Option<Fit> {
+    fn new(ctx: &Context, frames: &dyn TrialFrames) -> Option<Fit> {
         let names: Vec<&str> = ctx.model.markers.iter().map(|m| m.name.as_str()).collect();
-        let map = match_names_with(&names, &trial.labels, &ctx.synonyms()).ok()?.columns;
-        let count = |f: usize| map.iter().filter(|c| c.and_then(|c| trial.position(f, c)).is_some()).count();
-        let counts: Vec<usize> = (0..trial.n_frames()).map(count).collect();
+        let map = match_names_with(&names, &frames.header().labels, &ctx.synonyms()).ok()?.columns;
+        let count =
+            |t: &MarkerTrial, f: usize| map.iter().filter(|c| c.and_then(|c| t.position(f, c)).is_some()).count();
+        let mut counts: Vec<usize> = Vec::with_capacity(frames.header().n_frames());
+        for_each_window(frames, |_, w| counts.extend((0..w.n_frames()).map(|f| count(w, f)))).ok()?;
         let most = counts.iter().copied().max().unwrap_or(0);
         if most < 3 {
             return None;
@@ -245,10 +278,11 @@ impl Fit {
         cpu::forward(&ctx.model, &ctx.proxy.state(&ctx.proxy.default_proxies()), &mut ws);
         let (mut ratios, mut rotations) = (Vec::new(), Vec::new());
         for f in (0..n).map(|i| good[i * good.len() / n]) {
+            let trial = frames.window(f..f + 1).ok()?;
             let (a, b): (Vec<Vector3<f64>>, Vec<Vector3<f64>>) = map
                 .iter()
                 .enumerate()
-                .filter_map(|(m, c)| c.and_then(|c| trial.position(f, c)).map(|p| (ws.marker(m), Vector3::from(p))))
+                .filter_map(|(m, c)| c.and_then(|c| trial.position(0, c)).map(|p| (ws.marker(m), Vector3::from(p))))
                 .unzip();
             let (sa, sb) = (spread(&a), spread(&b));
             if sa > 0.0 && sb > 0.0 {

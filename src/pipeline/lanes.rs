@@ -280,7 +280,19 @@ pub fn resolve_outliers(
     results: &mut [Option<FrameResult>],
 ) -> Vec<usize> {
     let rmse: Vec<f64> = results.iter().filter_map(|r| solved(r).map(|r| r.1.rmse_m)).collect();
-    let threshold = outlier_threshold(&rmse);
+    resolve_outliers_above(eval, settings, inp, segments, outlier_threshold(&rmse), results)
+}
+
+/// [`resolve_outliers`] with the threshold given (m): the trial's, when `results` and
+/// `segments` are a part of it (indices relative to that part).
+pub fn resolve_outliers_above(
+    eval: &Evaluator<'_>,
+    settings: &SolverSettings,
+    inp: &TrialInputs<'_>,
+    segments: &[(usize, usize)],
+    threshold: f64,
+    results: &mut [Option<FrameResult>],
+) -> Vec<usize> {
     let mut kept = Vec::new();
     if threshold.is_nan() {
         return kept;

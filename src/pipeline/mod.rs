@@ -7,6 +7,7 @@ pub mod context;
 pub mod convention;
 pub mod device;
 pub mod export;
+pub mod frames;
 pub mod ik_tasks;
 pub mod lanes;
 pub mod matching;

@@ -6,9 +6,10 @@
 //! frames of later segments wait for the earlier segments. With one lane (what `smocap convert`
 //! uses), what is held beyond the input trial is the current gap of unsolved frames.
 
-use super::lanes::{resolve_outliers, run_lanes, FrameObservations, FrameResult, TrialInputs};
+use super::frames::{for_each_window, TrialFrames};
+use super::lanes::{resolve_outliers_above, run_lanes, FrameObservations, FrameResult, TrialInputs};
 use super::stats::GapStats;
-use super::trial::{gap_stats, match_markers, no_match, SinkError, TrialError, TrialResult};
+use super::trial::{match_markers, no_match, GapRuns, SinkError, TrialError, TrialResult};
 use super::Context;
 use crate::io::MarkerTrial;
 use crate::kinematics::backend::{BackendError, BatchBackend, CpuBackend};
@@ -33,6 +34,9 @@ pub struct SolvedFrame {
     pub seconds: f64,
     /// Bridged from its neighbours because too few markers were observed.
     pub bridged: bool,
+    /// The frame's observed markers in model-marker order (3 per marker, m, NaN where not
+    /// observed), as the solver read them.
+    pub observed: Vec<f64>,
 }
 
 /// What is known of a trial once all its frames went to the sink.
@@ -57,6 +61,7 @@ pub struct StreamedTrial {
 enum Stop {
     Backend(BackendError),
     Sink(usize, SinkError),
+    Read(String),
 }
 
 impl From<BackendError> for Stop {
@@ -70,29 +75,39 @@ struct Orderer<'a> {
     ctx: &'a Context,
     calibrated: &'a [f64],
     next: usize,
-    /// Finished ahead of `next` (several lanes).
-    early: BTreeMap<usize, FrameResult>,
+    /// Finished ahead of `next` (several lanes), with their observations.
+    early: BTreeMap<usize, (FrameResult, Vec<f64>)>,
     /// The last solved frame handed on.
     last: Option<(usize, Vec<f64>)>,
     /// Frames with too few markers waiting for the next solved frame.
-    gap: Vec<(usize, FrameResult)>,
+    gap: Vec<(usize, FrameResult, Vec<f64>)>,
     bridged: usize,
 }
 
 impl Orderer<'_> {
-    fn push(&mut self, f: usize, r: FrameResult, sink: &mut FrameSink<'_>) -> Result<(), Stop> {
-        self.early.insert(f, r);
-        while let Some(r) = self.early.remove(&self.next) {
+    /// Takes frame `f`'s result; `obs` is the window it lies in, frame `f` at `f - first`.
+    fn push(
+        &mut self,
+        f: usize,
+        r: FrameResult,
+        obs: (&FrameObservations<'_>, usize),
+        sink: &mut FrameSink<'_>,
+    ) -> Result<(), Stop> {
+        let mut observed = vec![0.0; 3 * obs.0.map.len()];
+        obs.0.fill(f - obs.1, &mut observed);
+        self.early.insert(f, (r, observed));
+        while let Some((r, observed)) = self.early.remove(&self.next) {
             let f = self.next;
             self.next += 1;
             if r.1.status == FrameStatus::TooFewMarkers {
-                self.gap.push((f, r));
+                self.gap.push((f, r, observed));
                 continue;
             }
             self.flush(Some((f, r.0.as_slice())), sink)?;
             self.last = Some((f, r.0.clone()));
             let (proxies, stats, seconds) = r;
-            sink(SolvedFrame { index: f, proxies, stats, seconds, bridged: false }).map_err(|e| Stop::Sink(f, e))?;
+            sink(SolvedFrame { index: f, proxies, stats, seconds, bridged: false, observed })
+                .map_err(|e| Stop::Sink(f, e))?;
         }
         Ok(())
     }
@@ -100,10 +115,11 @@ impl Orderer<'_> {
     /// Bridges the waiting frames between the last solved frame and `after`, and hands them on.
     fn flush(&mut self, after: Option<(usize, &[f64])>, sink: &mut FrameSink<'_>) -> Result<(), Stop> {
         let before = self.last.as_ref().map(|(g, p)| (*g, p.as_slice()));
-        for (f, (_, stats, seconds)) in std::mem::take(&mut self.gap) {
+        for (f, (_, stats, seconds), observed) in std::mem::take(&mut self.gap) {
             let proxies = bridge(self.ctx, f, before, after, self.calibrated);
             self.bridged += 1;
-            sink(SolvedFrame { index: f, proxies, stats, seconds, bridged: true }).map_err(|e| Stop::Sink(f, e))?;
+            sink(SolvedFrame { index: f, proxies, stats, seconds, bridged: true, observed })
+                .map_err(|e| Stop::Sink(f, e))?;
         }
         Ok(())
     }
@@ -159,7 +175,7 @@ pub fn segments(n: usize) -> Vec<(usize, usize)> {
 pub fn solve_trial_streaming(
     ctx: &Context,
     name: &str,
-    trial: &MarkerTrial,
+    trial: &dyn TrialFrames,
     calibration: &Calibration,
     threads: usize,
     lanes: usize,
@@ -170,18 +186,27 @@ pub fn solve_trial_streaming(
     // One morphology: every frame is solved at the calibrated scales and marker offsets.
     let pinned = ctx.pinned_to(calibration);
     let ctx = &pinned;
-    let matched = match_markers(ctx, name, trial)?;
+    let header = trial.header();
+    let matched = match_markers(ctx, name, header)?;
     let map = &matched.columns;
     if map.iter().all(Option::is_none) {
-        return Err(no_match(ctx, name, trial));
+        return Err(no_match(ctx, name, header));
     }
-    if trial.n_frames() == 0 {
+    if header.n_frames() == 0 {
         return Err(TrialError::Empty { trial: name.into() });
     }
-    if super::verdict::solvable_frames(ctx, trial, map) == 0 {
+    let read_err = |why: String| TrialError::Read { trial: name.into(), why };
+    // One pass before solving: frames with enough markers, and each column's gaps.
+    let mut solvable = 0;
+    let mut runs = GapRuns::new(header.n_markers());
+    for_each_window(trial, |_, w| {
+        solvable += super::verdict::solvable_frames(ctx, w, map);
+        runs.add(w);
+    })
+    .map_err(read_err)?;
+    if solvable == 0 {
         return Err(TrialError::NothingSolvable { trial: name.into(), min: ctx.settings.min_markers });
     }
-    let obs = FrameObservations { trial, map };
     let settings = &ctx.settings;
     let eval = ctx.evaluator();
     let ny = ctx.model.ny();
@@ -205,13 +230,16 @@ pub fn solve_trial_streaming(
         }
     }
     // Segments, one lane each at a time: fixed by the frame count alone, so that the result does
-    // not depend on the lane or thread count.
-    let n = trial.n_frames();
+    // not depend on the lane or thread count. Consecutive segments are read together, as many as
+    // fit in a window of the trial (all of them when it is held whole); each segment is solved
+    // as it would be in the whole trial, so the result does not depend on the window either.
+    let n = header.n_frames();
     let threads = threads.max(1);
     let lanes = lanes.max(1);
     let bounds = segments(n);
-    let inputs = TrialInputs {
-        observed: obs,
+    let groups = segment_groups(&bounds, trial.window_frames());
+    let base = TrialInputs {
+        observed: FrameObservations { trial: header, map },
         marker_weights: &ctx.marker_weights,
         reference: &y_cal,
         tracking_weights: &track_w,
@@ -220,6 +248,13 @@ pub fn solve_trial_streaming(
         tracking_weights_all: &track_w_all,
         neutral: &neutral,
         calibrated: &calibration.proxies,
+    };
+    // Frames `[w0, b)` of the trial for the segments `segs`, and those segments within it.
+    let window = |segs: &[(usize, usize)]| {
+        let (a, b) = (segs[0].0, segs[segs.len() - 1].1);
+        let w0 = a.saturating_sub(SEGMENT_RUN_IN);
+        let rel: Vec<(usize, usize)> = segs.iter().map(|&(a, b)| (a - w0, b - w0)).collect();
+        trial.window(w0..b).map(|w| (w0, w, rel)).map_err(Stop::Read)
     };
     let mut order = Orderer {
         ctx,
@@ -238,29 +273,41 @@ pub fn solve_trial_streaming(
     // it holds the solved frames (proxies and statistics, not observations) until its pass ends.
     let auto = settings.presolve == Presolve::Auto;
     let mut presolved = Vec::new();
-    let run = || -> Result<(), Stop> {
+    let mut backend = backend;
+    let mut run = || -> Result<(), Stop> {
         let mut held: Vec<Option<FrameResult>> = if auto { vec![None; n] } else { Vec::new() };
-        {
+        let mut cpu = None;
+        for &(g0, g1) in &groups {
+            let (w0, w, rel) = window(&bounds[g0..g1])?;
+            let obs = FrameObservations { trial: &w, map };
+            let inputs = TrialInputs { observed: obs, ..base };
             let mut done = |f: usize, r: FrameResult| {
                 if auto {
-                    held[f] = Some(r);
+                    held[f + w0] = Some(r);
                     Ok(())
                 } else {
-                    order.push(f, r, sink)
+                    order.push(f + w0, r, (&obs, w0), sink)
                 }
             };
-            match backend {
-                Some(b) => run_lanes(&eval, settings, &inputs, &bounds, SEGMENT_RUN_IN, lanes, b, &mut done)?,
-                None => {
-                    let mut cpu = CpuBackend::new(eval.clone());
-                    run_lanes(&eval, settings, &inputs, &bounds, SEGMENT_RUN_IN, lanes, &mut cpu, &mut done)?
-                }
-            }
+            let b: &mut dyn BatchBackend = match backend.as_deref_mut() {
+                Some(b) => b,
+                None => cpu.get_or_insert_with(|| CpuBackend::new(eval.clone())),
+            };
+            run_lanes(&eval, settings, &inputs, &rel, SEGMENT_RUN_IN, lanes, b, &mut done)?;
         }
         if auto {
-            presolved = resolve_outliers(&eval, settings, &inputs, &bounds, &mut held);
-            for (f, r) in held.into_iter().enumerate() {
-                order.push(f, r.expect("every frame lies in one segment"), sink)?;
+            let threshold = outlier_threshold_of(&held);
+            for &(g0, g1) in &groups {
+                let (w0, w, rel) = window(&bounds[g0..g1])?;
+                let obs = FrameObservations { trial: &w, map };
+                let inputs = TrialInputs { observed: obs, ..base };
+                let end = bounds[g1 - 1].1;
+                let kept = resolve_outliers_above(&eval, settings, &inputs, &rel, threshold, &mut held[w0..end]);
+                presolved.extend(kept.into_iter().map(|f| f + w0));
+                for f in bounds[g0].0..end {
+                    let r = held[f].take().expect("every frame lies in one segment");
+                    order.push(f, r, (&obs, w0), sink)?;
+                }
             }
         }
         debug_assert!(order.early.is_empty() && order.next == n, "every frame lies in one segment");
@@ -273,10 +320,12 @@ pub fn solve_trial_streaming(
     .map_err(|e| match e {
         Stop::Backend(source) => TrialError::Backend { trial: name.into(), source },
         Stop::Sink(frame, source) => TrialError::Output { trial: name.into(), frame, source },
+        Stop::Read(why) => read_err(why),
     })?;
     let names: Vec<&str> = ctx.model.markers.iter().map(|m| m.name.as_str()).collect();
-    let renamed = matched.renamed(&names, &trial.labels).into_iter().map(|(a, b)| (a.into(), b.into())).collect();
+    let renamed = matched.renamed(&names, &header.labels).into_iter().map(|(a, b)| (a.into(), b.into())).collect();
     let bridged = order.bridged;
+    let gaps = runs.stats(ctx, map, n, bridged);
     Ok(StreamedTrial {
         name: name.into(),
         frames: n,
@@ -284,11 +333,37 @@ pub fn solve_trial_streaming(
         unmatched_model: matched.unmatched_model.clone(),
         unmatched_trial: matched.unmatched_trial.clone(),
         renamed,
-        gaps: gap_stats(ctx, trial, map, bridged),
+        gaps,
         presolved,
         wall_seconds: start.elapsed().as_secs_f64(),
         threads,
     })
+}
+
+/// Consecutive runs `[g0, g1)` of `segments` whose frames fit in `window` frames (at least one
+/// segment each), covering them all.
+fn segment_groups(segments: &[(usize, usize)], window: usize) -> Vec<(usize, usize)> {
+    let mut groups = Vec::new();
+    let mut g0 = 0;
+    for (i, &(_, b)) in segments.iter().enumerate() {
+        let next_end = segments.get(i + 1).map(|s| s.1);
+        let a = segments[g0].0.saturating_sub(SEGMENT_RUN_IN);
+        if next_end.is_none_or(|e| e - a > window) {
+            groups.push((g0, i + 1));
+            g0 = i + 1;
+        }
+        let _ = b;
+    }
+    groups
+}
+
+/// The `auto` pre-solve's outlier threshold over the frames solved (not bridged).
+fn outlier_threshold_of(held: &[Option<FrameResult>]) -> f64 {
+    let rmse: Vec<f64> = held
+        .iter()
+        .filter_map(|r| r.as_ref().filter(|r| r.1.status != FrameStatus::TooFewMarkers).map(|r| r.1.rmse_m))
+        .collect();
+    crate::solve::presolve::outlier_threshold(&rmse)
 }
 
 /// Solves every frame of `trial` for a subject calibrated as `calibration` on the CPU backend,

@@ -162,10 +162,10 @@ pub fn calibrate_placed(
 
 /// [`calibrate_placed`] on the subject's static trials and motion trials together
 /// ([`super::calibration::calibrate_subject_with`]).
-pub fn calibrate_placed_with(
+pub fn calibrate_placed_with<T: super::frames::TrialFrames + ?Sized>(
     ctx: &Context,
-    statics: &[(&str, &MarkerTrial)],
-    motions: &[(&str, &MarkerTrial)],
+    statics: &[(&str, &T)],
+    motions: &[(&str, &T)],
 ) -> Result<(Calibration, Option<Context>), SetupError> {
     let c = super::calibration::calibrate_subject_with(ctx, statics, motions)?;
     let placed = c.marker_offsets.as_ref().map(|o| ctx.with_marker_offsets(o)).transpose()?;

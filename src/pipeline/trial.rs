@@ -23,6 +23,8 @@ pub enum TrialError {
     NoMarkerMatch { trial: String, trial_labels: String, model_labels: String },
     #[error("trial '{trial}': {source}")]
     Matching { trial: String, source: MatchError },
+    #[error("trial '{trial}': reading its frames: {why}")]
+    Read { trial: String, why: String },
     #[error("trial '{trial}' has no frames")]
     Empty { trial: String },
     #[error("trial '{trial}': no frame has at least {min} observed markers with a weight above 0, nothing to solve")]
@@ -77,21 +79,58 @@ pub fn match_markers(ctx: &Context, name: &str, trial: &MarkerTrial) -> Result<M
 
 /// Missing data of the matched markers; `below_min` frames had too few markers to solve.
 pub fn gap_stats(ctx: &Context, trial: &MarkerTrial, map: &[Option<usize>], below_min: usize) -> GapStats {
-    let n = trial.n_frames().max(1) as f64;
-    let markers: Vec<MarkerGaps> = ctx
-        .model
-        .markers
-        .iter()
-        .zip(map)
-        .filter_map(|(m, c)| c.map(|c| (m, trial.gaps_and_longest(c))))
-        .map(|(m, (missing, longest_gap))| MarkerGaps {
-            marker: m.name.clone(),
-            missing,
-            missing_fraction: missing as f64 / n,
-            longest_gap,
-        })
-        .collect();
-    GapStats { missing_samples: markers.iter().map(|m| m.missing).sum(), frames_below_min_markers: below_min, markers }
+    let mut runs = GapRuns::new(trial.n_markers());
+    runs.add(trial);
+    runs.stats(ctx, map, trial.n_frames(), below_min)
+}
+
+/// Each trial column's missing frames, longest run of them and current run, accumulated window
+/// by window ([`gap_stats`] of a trial read a window at a time).
+pub(crate) struct GapRuns(Vec<(usize, usize, usize)>);
+
+impl GapRuns {
+    pub(crate) fn new(columns: usize) -> Self {
+        GapRuns(vec![(0, 0, 0); columns])
+    }
+
+    /// Adds the frames of `w`, the next window.
+    pub(crate) fn add(&mut self, w: &MarkerTrial) {
+        for f in 0..w.n_frames() {
+            for (c, r) in self.0.iter_mut().enumerate() {
+                if w.position(f, c).is_none() {
+                    r.0 += 1;
+                    r.2 += 1;
+                    r.1 = r.1.max(r.2);
+                } else {
+                    r.2 = 0;
+                }
+            }
+        }
+    }
+
+    /// The gap statistics of the matched markers of a trial of `n` frames; `below_min` frames had
+    /// too few markers to solve.
+    pub(crate) fn stats(&self, ctx: &Context, map: &[Option<usize>], n: usize, below_min: usize) -> GapStats {
+        let n = n.max(1) as f64;
+        let markers: Vec<MarkerGaps> = ctx
+            .model
+            .markers
+            .iter()
+            .zip(map)
+            .filter_map(|(m, c)| c.map(|c| (m, self.0[c])))
+            .map(|(m, (missing, longest_gap, _))| MarkerGaps {
+                marker: m.name.clone(),
+                missing,
+                missing_fraction: missing as f64 / n,
+                longest_gap,
+            })
+            .collect();
+        GapStats {
+            missing_samples: markers.iter().map(|m| m.missing).sum(),
+            frames_below_min_markers: below_min,
+            markers,
+        }
+    }
 }
 
 /// Observations in model-marker order, frame-major (`frame · 3M + 3·marker + axis`), NaN gaps.

@@ -514,25 +514,49 @@ pub fn track(
     frame_template: &FrameProblem<'_>,
     p0: &[f64],
 ) -> Vec<Vec<f64>> {
-    let proxy = solver.eval.proxy;
-    let saved = std::mem::replace(&mut solver.free, proxy.proxies.iter().map(|p| p.kind != ProxyKind::Scale).collect());
-    let mut out = Vec::with_capacity(frames.len());
-    let mut p = p0.to_vec();
-    let mut warm = false;
-    for obs in frames {
+    let mut t = Tracker::new(solver, p0);
+    let out = frames.iter().map(|obs| t.step(solver, obs, frame_template).to_vec()).collect();
+    t.end(solver);
+    out
+}
+
+/// [`track`] a frame at a time: poses of consecutive frames, each warm-started from the one
+/// before (several starts after a frame with too few markers). Between [`Tracker::new`] and
+/// [`Tracker::end`] the solver moves the pose proxies only.
+pub struct Tracker {
+    p: Vec<f64>,
+    p0: Vec<f64>,
+    warm: bool,
+    saved: Vec<bool>,
+}
+
+impl Tracker {
+    /// Starts tracking from `p0` (which also fixes the scales).
+    pub fn new(solver: &mut FrameSolver<'_>, p0: &[f64]) -> Tracker {
+        let proxy = solver.eval.proxy;
+        let saved =
+            std::mem::replace(&mut solver.free, proxy.proxies.iter().map(|p| p.kind != ProxyKind::Scale).collect());
+        Tracker { p: p0.to_vec(), p0: p0.to_vec(), warm: false, saved }
+    }
+
+    /// The pose of the next frame, observed as `obs`.
+    pub fn step(&mut self, solver: &mut FrameSolver<'_>, obs: &[f64], frame_template: &FrameProblem<'_>) -> &[f64] {
         let fp = FrameProblem { observed: obs, ..*frame_template };
-        let st = if warm {
-            solver.solve(&fp, &mut p)
+        let st = if self.warm {
+            solver.solve(&fp, &mut self.p)
         } else {
             // Several starts for a frame without a previous solution (neutral pose with root
             // placement and sweeps, root placement alone): a crossed or flipped first frame
             // would carry its basin through the whole track.
-            p = p0.to_vec();
-            multi_start(solver, &fp, &mut p, p0)
+            self.p.copy_from_slice(&self.p0);
+            multi_start(solver, &fp, &mut self.p, &self.p0)
         };
-        warm = st.status != super::FrameStatus::TooFewMarkers;
-        out.push(p.clone());
+        self.warm = st.status != super::FrameStatus::TooFewMarkers;
+        &self.p
     }
-    solver.free = saved;
-    out
+
+    /// Gives the solver back its free proxies.
+    pub fn end(self, solver: &mut FrameSolver<'_>) {
+        solver.free = self.saved;
+    }
 }
