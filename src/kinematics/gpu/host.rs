@@ -39,38 +39,46 @@ pub(super) struct PackJob<'a, 'f> {
     pub proxies: &'a [f64],
 }
 
-/// Whether marker `m` of `fr` is observed and weighted.
-#[inline]
-fn used(fr: &FrameProblem<'_>, m: usize) -> bool {
-    fr.marker_weights[m] > 0.0 && !fr.observed[3 * m..3 * m + 3].iter().any(|v| v.is_nan())
-}
-
-/// One frame's input block into `w` (length `rows.input`); returns its reference point: the
-/// centroid of the observed markers, rounded to f32 (exact in both precisions).
-fn pack_frame<W: Word>(job: &PackJob<'_, '_>, i: usize, w: &mut [W]) -> [f64; 3] {
-    let (r, fr) = (&job.rows, &job.frames[i]);
+/// One frame's input block into `w` (length `rows.input`), with `mask` (length nm) as scratch;
+/// returns its reference point: the centroid of the observed and weighted markers, rounded to
+/// f32 (exact in both precisions). Unobserved markers get weight and offset 0.
+fn pack_frame<W: Word>(job: &PackJob<'_, '_>, i: usize, w: &mut [W], mask: &mut [bool]) -> [f64; 3] {
+    let (r, fr, nm, np) = (&job.rows, &job.frames[i], job.nm, job.np);
+    let (obs, mw) = (&fr.observed[..3 * nm], &fr.marker_weights[..nm]);
     let (mut sum, mut n) = ([0.0f64; 3], 0usize);
-    for m in (0..job.nm).filter(|&m| used(fr, m)) {
-        for (a, s) in sum.iter_mut().enumerate() {
-            *s += fr.observed[3 * m + a];
+    for ((u, o), &wt) in mask.iter_mut().zip(obs.chunks_exact(3)).zip(mw) {
+        *u = wt > 0.0 && !(o[0].is_nan() | o[1].is_nan() | o[2].is_nan());
+        if *u {
+            sum[0] += o[0];
+            sum[1] += o[1];
+            sum[2] += o[2];
+            n += 1;
         }
-        n += 1;
     }
     let c = sum.map(|s| if n > 0 { (s / n as f64) as f32 as f64 } else { 0.0 });
-    for (o, &p) in w[r.i_p..r.i_p + job.np].iter_mut().zip(&job.proxies[i * job.np..]) {
+    for (o, &p) in w[r.i_p..r.i_p + np].iter_mut().zip(&job.proxies[i * np..(i + 1) * np]) {
         *o = W::of(p);
     }
-    for m in 0..job.nm {
-        let u = used(fr, m);
-        for a in 0..3 {
-            w[r.i_obs + 3 * m + a] = W::of(if u { fr.observed[3 * m + a] - c[a] } else { 0.0 });
+    let (wo, wm) = w[r.i_obs..r.i_tref].split_at_mut(3 * nm);
+    for (((d, o), m), (&u, &wt)) in wo.chunks_exact_mut(3).zip(obs.chunks_exact(3)).zip(wm.iter_mut()).zip(mask.iter().zip(mw)) {
+        if u {
+            d[0] = W::of(o[0] - c[0]);
+            d[1] = W::of(o[1] - c[1]);
+            d[2] = W::of(o[2] - c[2]);
+            *m = W::of(wt);
+        } else {
+            d.fill(W::of(0.0));
+            *m = W::of(0.0);
         }
-        w[r.i_mw + m] = W::of(if u { fr.marker_weights[m] } else { 0.0 });
     }
     let ny = r.i_tw - r.i_tref;
-    for j in 0..ny {
-        w[r.i_tref + j] = W::of(fr.tracking_ref.get(j).copied().unwrap_or(0.0));
-        w[r.i_tw + j] = W::of(fr.tracking_weights.get(j).copied().unwrap_or(0.0));
+    let (wr, wt) = w[r.i_tref..r.i_c].split_at_mut(ny);
+    for (d, v) in [(wr, fr.tracking_ref), (wt, fr.tracking_weights)] {
+        let m = v.len().min(ny);
+        for (o, &x) in d[..m].iter_mut().zip(&v[..m]) {
+            *o = W::of(x);
+        }
+        d[m..].fill(W::of(0.0));
     }
     for a in 0..3 {
         w[r.i_c + a] = W::of(c[a]);
@@ -84,7 +92,7 @@ pub(super) fn pack<W: Word>(
     job: &PackJob<'_, '_>,
     mut dst: wgpu::WriteOnly<'_, [u8]>,
     refs: &mut [[f64; 3]],
-    scratch: &mut [Vec<u64>],
+    scratch: &mut [PackScratch],
 ) -> f64 {
     let n = job.frames.len();
     let per = n.div_ceil(scratch.len().max(1)).max(1);
@@ -99,11 +107,13 @@ pub(super) fn pack<W: Word>(
         .enumerate()
         .map(|(k, (r, s))| {
             cpu(|| {
-                s.resize(job.rows.input.div_ceil(8 / std::mem::size_of::<W>()).max(1), 0);
-                let w: &mut [W] = &mut bytemuck::cast_slice_mut::<u64, W>(s.as_mut_slice())[..job.rows.input];
+                s.words.resize(job.rows.input.div_ceil(8 / std::mem::size_of::<W>()).max(1), 0);
+                s.mask.resize(job.nm, false);
+                let w: &mut [W] = &mut bytemuck::cast_slice_mut::<u64, W>(&mut s.words)[..job.rows.input];
+                let mask = &mut s.mask[..];
                 for (j, c) in r.iter_mut().enumerate() {
                     let i = k * per + j;
-                    *c = pack_frame(job, i, w);
+                    *c = pack_frame(job, i, w, mask);
                     let bytes: &[u8] = bytemuck::cast_slice(w);
                     // SAFETY: frame i's block `[i·block, (i+1)·block)` lies inside the mapped range
                     // (asserted above), is written by this piece only, and is never read.
@@ -113,6 +123,14 @@ pub(super) fn pack<W: Word>(
             .1
         })
         .sum()
+}
+
+/// One packing piece's scratch: a frame's block (u64 storage, aligned for both word sizes) and
+/// its markers' used flags.
+#[derive(Clone, Debug, Default)]
+pub(super) struct PackScratch {
+    words: Vec<u64>,
+    mask: Vec<bool>,
 }
 
 /// The start of the mapped upload range, shared by the packing pieces.

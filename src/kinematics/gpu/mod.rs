@@ -63,6 +63,11 @@ pub struct WgpuBackend {
     energy: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
     input: wgpu::Buffer,
+    /// Two persistently mapped upload buffers: the host packs one chunk into one while the
+    /// other is copied to `input`.
+    upload: [wgpu::Buffer; 2],
+    /// Re-mapping of an upload buffer after its copy was submitted.
+    upload_wait: [Option<MapWait>; 2],
     output: wgpu::Buffer,
     /// Two read-back buffers: one chunk is read while the next one runs.
     staging: [wgpu::Buffer; 2],
@@ -73,7 +78,7 @@ pub struct WgpuBackend {
     nm: usize,
     precision: Precision,
     /// Per-piece scratch of one input block while packing.
-    pack_scratch: Vec<Vec<u64>>,
+    pack_scratch: Vec<host::PackScratch>,
     /// Reference point of each frame of the two chunks in flight (f32-representable, in f64).
     refs: [Vec<[f64; 3]>; 2],
     errors: ErrorSlot,
@@ -248,6 +253,14 @@ impl WgpuBackend {
         };
         use wgpu::BufferUsages as U;
         let input = buffer("input", cap * rows.input, U::STORAGE | U::COPY_DST);
+        let upload = [0, 1].map(|_| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("upload"),
+                size: word * (cap * rows.input) as u64,
+                usage: U::MAP_WRITE | U::COPY_SRC,
+                mapped_at_creation: true,
+            })
+        });
         let scratch = buffer("scratch", cap * rows.scratch, U::STORAGE);
         // Output: the compact energy rows (4 words per frame), then one block per frame.
         let output = buffer("output", cap * (rows.output + 4), U::STORAGE | U::COPY_SRC);
@@ -282,6 +295,8 @@ impl WgpuBackend {
             energy,
             bind_group,
             input,
+            upload,
+            upload_wait: [None, None],
             output,
             staging,
             params,
@@ -290,7 +305,7 @@ impl WgpuBackend {
             np: eval.proxy.np(),
             nm: eval.model.markers.len(),
             precision,
-            pack_scratch: vec![Vec::new(); 2 * rayon::current_num_threads().max(1)],
+            pack_scratch: vec![host::PackScratch::default(); 2 * rayon::current_num_threads().max(1)],
             refs: [vec![[0.0; 3]; cap], vec![[0.0; 3]; cap]],
             errors,
             phases: PhaseTimes::default(),
@@ -309,7 +324,7 @@ impl WgpuBackend {
         }
     }
 
-    /// Packs `frames` straight into the mapped upload range of the input buffer (frame-major),
+    /// Packs `frames` straight into the mapped upload buffer `slot` (frame-major),
     /// dispatches them and starts reading back their results into staging buffer `slot`:
     /// `(E, Σ‖r‖², used)` rows for `energy`, whole output blocks for `linearize`.
     fn submit(
@@ -323,10 +338,27 @@ impl WgpuBackend {
         let t = Instant::now();
         let size = std::num::NonZeroU64::new((n * r.input * word) as u64)
             .ok_or_else(|| BackendError::Shape("an empty chunk".into()))?;
-        let cpu = {
-            let Some(mut view) = self.queue.write_buffer_with(&self.input, 0, size) else {
-                return Err(self.fail("mapping the upload range".into()));
+        if let Some((index, rx)) = self.upload_wait[slot].take() {
+            let ready = match rx.try_recv() {
+                Ok(r) => Some(r),
+                Err(_) => {
+                    self.device
+                        .poll(wgpu::PollType::Wait { submission_index: Some(index), timeout: None })
+                        .map_err(|e| self.fail(format!("waiting for the device: {e}")))?;
+                    rx.recv().ok()
+                }
             };
+            match ready {
+                Some(Ok(())) => {}
+                Some(Err(e)) => return Err(self.fail(format!("mapping the upload buffer: {e}"))),
+                None => return Err(self.fail("the upload buffer was never mapped".into())),
+            }
+        }
+        let cpu = {
+            let mut view = self.upload[slot]
+                .slice(..size.get())
+                .get_mapped_range_mut()
+                .map_err(|e| self.fail(format!("writing the inputs: {e:?}")))?;
             let job = host::PackJob { rows: r, np: self.np, nm: self.nm, frames, proxies };
             let (refs, scratch) = (&mut self.refs[slot], &mut self.pack_scratch);
             match self.precision {
@@ -334,12 +366,14 @@ impl WgpuBackend {
                 Precision::F64 => host::pack::<f64>(&job, view.slice(..), refs, scratch),
             }
         };
+        self.upload[slot].unmap();
         self.phases.pack_s += t.elapsed().as_secs_f64();
         self.phases.pack_cpu_s += cpu;
         let t = Instant::now();
         let st = stride(n);
         self.queue.write_buffer(&self.params, 0, bytemuck::cast_slice(&[n as u32, st as u32, 0, 0]));
         let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("chunk") });
+        enc.copy_buffer_to_buffer(&self.upload[slot], 0, &self.input, 0, size.get());
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
             pass.set_pipeline(if linearize { &self.linearize } else { &self.energy });
@@ -353,6 +387,11 @@ impl WgpuBackend {
         };
         enc.copy_buffer_to_buffer(&self.output, from, &self.staging[slot], 0, bytes);
         let index = self.queue.submit([enc.finish()]);
+        let (utx, urx) = std::sync::mpsc::channel();
+        self.upload[slot].slice(..).map_async(wgpu::MapMode::Write, move |r| {
+            let _ = utx.send(r);
+        });
+        self.upload_wait[slot] = Some((index.clone(), urx));
         let (tx, rx) = std::sync::mpsc::channel();
         self.staging[slot].slice(..bytes).map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
@@ -429,6 +468,10 @@ impl WgpuBackend {
 fn stride(n: usize) -> usize {
     n.div_ceil(64) * 64
 }
+
+/// An upload buffer being mapped again: the submission that last read it, and the callback's
+/// result.
+type MapWait = (wgpu::SubmissionIndex, std::sync::mpsc::Receiver<Result<(), wgpu::BufferAsyncError>>);
 
 /// A chunk submitted and being read back.
 struct Pending {
