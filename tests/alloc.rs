@@ -74,8 +74,8 @@ fn solving_frames_allocates_nothing_once_warm() {
 /// leaves it: f32, upper triangle packed by columns) allocates nothing once warm.
 #[test]
 fn a_step_from_a_handed_over_packed_model_allocates_nothing_once_warm() {
-    use smocap::kinematics::backend::{upper_index, GnView, HessianView, Reals};
     use smocap::kinematics::assembly::EvalWorkspace;
+    use smocap::kinematics::backend::{upper_index, GnView, HessianView, Reals};
     use smocap::solve::trqp::Next;
     let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     COUNTED.with(|c| c.set(true));

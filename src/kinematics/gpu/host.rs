@@ -60,7 +60,9 @@ fn pack_frame<W: Word>(job: &PackJob<'_, '_>, i: usize, w: &mut [W], mask: &mut 
         *o = W::of(p);
     }
     let (wo, wm) = w[r.i_obs..r.i_tref].split_at_mut(3 * nm);
-    for (((d, o), m), (&u, &wt)) in wo.chunks_exact_mut(3).zip(obs.chunks_exact(3)).zip(wm.iter_mut()).zip(mask.iter().zip(mw)) {
+    for (((d, o), m), (&u, &wt)) in
+        wo.chunks_exact_mut(3).zip(obs.chunks_exact(3)).zip(wm.iter_mut()).zip(mask.iter().zip(mw))
+    {
         if u {
             d[0] = W::of(o[0] - c[0]);
             d[1] = W::of(o[1] - c[1]);
