@@ -6,9 +6,10 @@
 // buffer layouts.
 //
 // The host prepends a header of `const` declarations (sizes and section offsets of one model, and
-// the chunk capacity `CAP` the buffers hold). Per-frame arrays are structure-of-arrays: entry `row`
+// the chunk capacity `CAP` the buffers hold). Input and output are frame-major (one block per
+// frame, which the host writes and reads in place); scratch is structure-of-arrays: entry `row`
 // of frame `f` lives at `row * params.stride + f` (the chunk's frame count rounded up to a
-// workgroup), so neighbouring invocations touch neighbouring words and a small chunk moves little.
+// workgroup), so that neighbouring invocations touch neighbouring words.
 //
 // Positions are relative to a per-frame reference point `c` (subtracted in f64 on the host), so
 // that f32 carries the body-scale differences rather than lab-scale coordinates; Jacobian rows
@@ -33,8 +34,20 @@ struct Params {
 
 const NONE: u32 = 0xffffffffu;
 
+// Scratch: structure of arrays.
 fn at(row: u32, f: u32) -> u32 {
     return row * params.stride + f;
+}
+
+// Input: one block of IN_ROWS words per frame.
+fn ai(row: u32, f: u32) -> u32 {
+    return f * IN_ROWS + row;
+}
+
+// Output: the compact energy rows (4 words per frame, CAP frames), then one block of OUT_ROWS
+// words per frame.
+fn ao(row: u32, f: u32) -> u32 {
+    return 4u * CAP + f * OUT_ROWS + row;
 }
 
 fn mf3(i: u32) -> vec3<real> {
@@ -164,11 +177,11 @@ fn forward(f: u32) {
     for (var t = 0u; t < NT; t += 1u) {
         let yj = mu[U_TERM + 3u * t];
         let k = mu[U_TERM + 3u * t + 1u];
-        let vd = feval(mu[U_TERM + 3u * t + 2u], inp[at(I_P + k, f)]);
+        let vd = feval(mu[U_TERM + 3u * t + 2u], inp[ai(I_P + k, f)]);
         scr[at(S_Y + yj, f)] += vd.x;
         scr[at(S_DPHI + t, f)] = vd.y;
     }
-    let c = vec3<real>(inp[at(I_C, f)], inp[at(I_C + 1u, f)], inp[at(I_C + 2u, f)]);
+    let c = vec3<real>(inp[ai(I_C, f)], inp[ai(I_C + 1u, f)], inp[ai(I_C + 2u, f)]);
     // Bodies in topological order.
     for (var b = 0u; b < NB; b += 1u) {
         let parent = mu[U_BODY + 3u * b];
@@ -223,12 +236,12 @@ fn forward(f: u32) {
     for (var m = 0u; m < NM; m += 1u) {
         let b = mu[U_MARK + m];
         let x = s3(S_POS + 3u * b, f) + rot(b, f) * (scale(b, f) * mf3(F_MARK + 3u * m));
-        outb[at(O_X + 3u * m, f)] = x.x;
-        outb[at(O_X + 3u * m + 1u, f)] = x.y;
-        outb[at(O_X + 3u * m + 2u, f)] = x.z;
-        let w = inp[at(I_MW + m, f)];
+        outb[ao(O_X + 3u * m, f)] = x.x;
+        outb[ao(O_X + 3u * m + 1u, f)] = x.y;
+        outb[ao(O_X + 3u * m + 2u, f)] = x.z;
+        let w = inp[ai(I_MW + m, f)];
         if (w > 0.0) {
-            let o = vec3<real>(inp[at(I_OBS + 3u * m, f)], inp[at(I_OBS + 3u * m + 1u, f)], inp[at(I_OBS + 3u * m + 2u, f)]);
+            let o = vec3<real>(inp[ai(I_OBS + 3u * m, f)], inp[ai(I_OBS + 3u * m + 1u, f)], inp[ai(I_OBS + 3u * m + 2u, f)]);
             let d = x - o;
             let d2 = dot(d, d);
             e += 0.5 * w * d2;
@@ -237,29 +250,29 @@ fn forward(f: u32) {
         }
     }
     for (var j = 0u; j < NY; j += 1u) {
-        let w = inp[at(I_TW + j, f)];
+        let w = inp[ai(I_TW + j, f)];
         if (w > 0.0) {
-            let d = scr[at(S_Y + j, f)] - inp[at(I_TREF + j, f)];
+            let d = scr[at(S_Y + j, f)] - inp[ai(I_TREF + j, f)];
             e += 0.5 * w * d * d;
         }
     }
-    outb[at(O_E, f)] = e;
-    outb[at(O_SQ, f)] = sq;
-    outb[at(O_USED, f)] = used;
+    outb[ao(O_E, f)] = e;
+    outb[ao(O_SQ, f)] = sq;
+    outb[ao(O_USED, f)] = used;
 }
 
-// Index of H[i][j] (i ≤ j) in the packed upper triangle, row by row.
+// Index of H[i][j] (i ≤ j) in the upper triangle packed column by column.
 fn hidx(i: u32, j: u32) -> u32 {
-    return O_H + i * (2u * NP - i + 1u) / 2u + (j - i);
+    return O_H + j * (j + 1u) / 2u + i;
 }
 
 // J_m rows of every used marker, H (upper triangle) and g, after `forward`.
 fn assemble(f: u32) {
     for (var k = 0u; k < NP; k += 1u) {
-        outb[at(O_G + k, f)] = 0.0;
+        outb[ao(O_G + k, f)] = 0.0;
     }
     for (var k = 0u; k < NH; k += 1u) {
-        outb[at(O_H + k, f)] = 0.0;
+        outb[ao(O_H + k, f)] = 0.0;
     }
     for (var lb = 0u; lb < NLB; lb += 1u) {
         let base = U_LB + 7u * lb;
@@ -272,7 +285,7 @@ fn assemble(f: u32) {
         var any = false;
         for (var q = mu[base + 5u]; q < mu[base + 6u]; q += 1u) {
             let m = mu[U_LBM + 3u * q];
-            let w = inp[at(I_MW + m, f)];
+            let w = inp[ai(I_MW + m, f)];
             if (w <= 0.0) {
                 continue;
             }
@@ -325,37 +338,37 @@ fn assemble(f: u32) {
                 let slot = mu[U_OITEM + 3u * oi + 2u];
                 put3(S_ROW + 3u * slot, f, s3(S_ROW + 3u * slot, f) + rb[kk] * (off[kk] * d));
             }
-            let x = vec3<real>(outb[at(O_X + 3u * m, f)], outb[at(O_X + 3u * m + 1u, f)], outb[at(O_X + 3u * m + 2u, f)]);
-            let o = vec3<real>(inp[at(I_OBS + 3u * m, f)], inp[at(I_OBS + 3u * m + 1u, f)], inp[at(I_OBS + 3u * m + 2u, f)]);
+            let x = vec3<real>(outb[ao(O_X + 3u * m, f)], outb[ao(O_X + 3u * m + 1u, f)], outb[ao(O_X + 3u * m + 2u, f)]);
+            let o = vec3<real>(inp[ai(I_OBS + 3u * m, f)], inp[ai(I_OBS + 3u * m + 1u, f)], inp[ai(I_OBS + 3u * m + 2u, f)]);
             let r = x - o;
             for (var i = 0u; i < ns; i += 1u) {
                 let ki = mu[slots + i];
                 let ci = w * s3(S_ROW + 3u * i, f);
-                outb[at(O_G + ki, f)] += dot(ci, r);
+                outb[ao(O_G + ki, f)] += dot(ci, r);
                 for (var j = i; j < ns; j += 1u) {
                     let h = hidx(ki, mu[slots + j]);
-                    outb[at(h, f)] += dot(ci, s3(S_ROW + 3u * j, f));
+                    outb[ao(h, f)] += dot(ci, s3(S_ROW + 3u * j, f));
                 }
             }
         }
     }
     // Tracking term J_Φᵀ W_t J_Φ, J_Φᵀ W_t e_t.
     for (var j = 0u; j < NY; j += 1u) {
-        let w = inp[at(I_TW + j, f)];
+        let w = inp[ai(I_TW + j, f)];
         if (w <= 0.0) {
             continue;
         }
-        let e = scr[at(S_Y + j, f)] - inp[at(I_TREF + j, f)];
+        let e = scr[at(S_Y + j, f)] - inp[ai(I_TREF + j, f)];
         let t0 = mu[U_YT + 2u * j];
         let t1 = mu[U_YT + 2u * j + 1u];
         for (var t = t0; t < t1; t += 1u) {
             let kt = mu[U_TERM + 3u * t + 1u];
             let dt = scr[at(S_DPHI + t, f)];
-            outb[at(O_G + kt, f)] += w * dt * e;
+            outb[ao(O_G + kt, f)] += w * dt * e;
             for (var u = t0; u < t1; u += 1u) {
                 let ku = mu[U_TERM + 3u * u + 1u];
                 if (kt <= ku) {
-                    outb[at(hidx(kt, ku), f)] += w * dt * scr[at(S_DPHI + u, f)];
+                    outb[ao(hidx(kt, ku), f)] += w * dt * scr[at(S_DPHI + u, f)];
                 }
             }
         }
@@ -379,4 +392,7 @@ fn energy(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     forward(f);
+    outb[4u * f] = outb[ao(O_E, f)];
+    outb[4u * f + 1u] = outb[ao(O_SQ, f)];
+    outb[4u * f + 2u] = outb[ao(O_USED, f)];
 }

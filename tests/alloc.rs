@@ -70,6 +70,61 @@ fn solving_frames_allocates_nothing_once_warm() {
     assert_eq!(allocated, 0, "{allocated} allocations in 39 frames");
 }
 
+/// The step QP formed from a model handed over in place (`linearized_view`, `H` as the device
+/// leaves it: f32, upper triangle packed by columns) allocates nothing once warm.
+#[test]
+fn a_step_from_a_handed_over_packed_model_allocates_nothing_once_warm() {
+    use smocap::kinematics::assembly::EvalWorkspace;
+    use smocap::kinematics::backend::{upper_index, GnView, HessianView, Reals};
+    use smocap::solve::trqp::Next;
+    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    COUNTED.with(|c| c.set(true));
+    let ctx = Context::shipped().unwrap();
+    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 20, seed: 3, ..SynthOptions::default() });
+    let eval = ctx.evaluator();
+    let (np, stride) = (ctx.proxy.np(), 3 * ctx.model.markers.len());
+    let zeros = vec![0.0; ctx.model.ny()];
+    let mut solver = FrameSolver::new(&eval, ctx.settings.clone(), make_qp(QpBackend::Boxqp));
+    let mut ws = EvalWorkspace::new(&ctx.model, &ctx.proxy);
+    let (mut h32, mut g32) = (vec![0.0f32; np * (np + 1) / 2], vec![0.0f32; np]);
+    let mut p = vec![0.0; np];
+    let mut run = |f: usize, solver: &mut FrameSolver<'_>| {
+        let frame = FrameProblem {
+            observed: &s.trial.positions[f * stride..(f + 1) * stride],
+            marker_weights: &ctx.marker_weights,
+            tracking_ref: &zeros,
+            tracking_weights: &zeros,
+        };
+        p.copy_from_slice(&s.truth.proxies[f]);
+        p[0] += 0.01;
+        let mut it = solver.begin(&mut p);
+        eval.linearize(&p, &frame, &mut ws);
+        for j in 0..np {
+            g32[j] = ws.gn.g[j] as f32;
+            for i in 0..=j {
+                h32[upper_index(i, j)] = ws.gn.h[(i, j)] as f32;
+            }
+        }
+        let view = GnView {
+            energy: ws.gn.energy,
+            marker_sq_sum: ws.gn.marker_sq_sum,
+            markers_used: ws.gn.markers_used,
+            g: Reals::F32(&g32),
+            h: HessianView::UpperColumns(Reals::F32(&h32)),
+            markers: Reals::F64(&ws.kin.markers),
+            reference: [0.0; 3],
+        };
+        let next = solver.linearized_view(&mut it, &p, &view);
+        matches!(next, Next::Energy)
+    };
+    run(0, &mut solver); // warm-up
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    let steps = (1..20).filter(|&f| run(f, &mut solver)).count();
+    let allocated = ALLOCATIONS.load(Ordering::Relaxed) - before;
+    assert!(steps > 0, "no step was taken");
+    assert_eq!(allocated, 0, "{allocated} allocations in 19 handed-over steps");
+}
+
 /// Writing a solved frame to its MCAP file (kinematics, protobuf encoding of `/tf`, `/markers`,
 /// `/smocap/state`, `/smocap/stats`, the chunk's compression) allocates nothing of its own per
 /// frame: with the whole trial in one chunk, what remains is the MCAP writer's amortised growth

@@ -3,7 +3,7 @@
 //! evaluated at the true proxies; the first repetition is a warm-up and not timed.
 
 use crate::kinematics::assembly::FrameProblem;
-use crate::kinematics::backend::{BatchBackend, CpuBackend, EnergyEval, FrameModel};
+use crate::kinematics::backend::{BatchBackend, CpuBackend, EnergyEval, FrameModel, GnSink, GnView};
 use crate::kinematics::gpu::PhaseTimes;
 use crate::pipeline::device::{choose, BackendChoice, Chosen};
 use crate::pipeline::Context;
@@ -55,7 +55,14 @@ pub fn run(a: BenchArgs) -> anyhow::Result<u8> {
         chosen.name(),
         a.repeats
     );
-    println!("# backend\tbatch\tlinearize_ms\tlinearize_frames_per_s\tenergy_ms\tenergy_frames_per_s");
+    println!(
+        "# backend\tbatch\tlinearize_ms\tlinearize_frames_per_s\thandoff_ms\thandoff_frames_per_s\tenergy_ms\tenergy_frames_per_s"
+    );
+    println!(
+        "#   linearize: (H, g, E, x) copied into owned per-frame results (both triangles of H, f64; \
+         batches up to {FULL_COPY_MAX} frames); handoff: each frame's model handed to a solver-like sink \
+         that copies E, g and the statistics, H left in place for the QP to read"
+    );
     for &n in &a.sizes {
         let n = n.max(1);
         let frames: Vec<FrameProblem<'_>> = (0..n)
@@ -70,11 +77,15 @@ pub fn run(a: BenchArgs) -> anyhow::Result<u8> {
             })
             .collect();
         let proxies: Vec<f64> = (0..n).flat_map(|i| s.truth.proxies[i % distinct].iter().copied()).collect();
-        let mut out = vec![FrameModel::new(np, nm); n];
+        let mut out = if n <= FULL_COPY_MAX { vec![FrameModel::new(np, nm); n] } else { Vec::new() };
+        let mut handoff: Vec<Handoff> = (0..n).map(|_| Handoff::new(np)).collect();
         let mut energies = vec![EnergyEval::default(); n];
         let repeats = a.repeats.max(1);
         // Each kind of call: a warm-up, then `repeats` timed calls (wgpu: with its phase account).
-        let mut timed = |linearize: bool| -> anyhow::Result<(f64, Option<PhaseTimes>)> {
+        let mut timed = |kind: Kind| -> anyhow::Result<(f64, Option<PhaseTimes>)> {
+            if kind == Kind::Linearize && out.is_empty() {
+                return Ok((f64::NAN, None));
+            }
             let mut times = Vec::new();
             for r in 0..=repeats {
                 if r == 1 {
@@ -87,10 +98,14 @@ pub fn run(a: BenchArgs) -> anyhow::Result<u8> {
                     Chosen::Wgpu(b) => b.as_mut(),
                 };
                 let t = Instant::now();
-                if linearize {
-                    backend.linearize(&frames, &proxies, &mut out)?;
-                } else {
-                    backend.energy(&frames, &proxies, &mut energies)?;
+                match kind {
+                    Kind::Linearize => backend.linearize(&frames, &proxies, &mut out)?,
+                    Kind::Handoff => {
+                        let mut sinks: Vec<&mut dyn GnSink> =
+                            handoff.iter_mut().map(|h| h as &mut dyn GnSink).collect();
+                        backend.linearize_into(&frames, &proxies, &mut sinks)?
+                    }
+                    Kind::Energy => backend.energy(&frames, &proxies, &mut energies)?,
                 }
                 if r > 0 {
                     times.push(t.elapsed().as_secs_f64());
@@ -102,32 +117,75 @@ pub fn run(a: BenchArgs) -> anyhow::Result<u8> {
             };
             Ok((median(&mut times), phases))
         };
-        let (ml, pl) = timed(true)?;
-        let (me, pe) = timed(false)?;
+        let (ml, pl) = timed(Kind::Linearize)?;
+        let (mh, ph) = timed(Kind::Handoff)?;
+        let (me, pe) = timed(Kind::Energy)?;
+        let fps = |t: f64| if t.is_nan() { "-".to_string() } else { format!("{:.0}", n as f64 / t) };
         println!(
-            "{}\t{n}\t{:.3}\t{:.0}\t{:.3}\t{:.0}",
+            "{}\t{n}\t{:.3}\t{}\t{:.3}\t{}\t{:.3}\t{}",
             chosen.name(),
             ml * 1e3,
-            n as f64 / ml,
+            fps(ml),
+            mh * 1e3,
+            fps(mh),
             me * 1e3,
-            n as f64 / me
+            fps(me)
         );
-        for (what, p) in [("linearize", pl), ("energy", pe)] {
+        for (what, p) in [("linearize", pl), ("handoff", ph), ("energy", pe)] {
             if let Some(p) = p {
                 let per = |s: f64| s * 1e3 / repeats as f64;
+                let us = |s: f64| s * 1e6 / p.frames.max(1) as f64;
                 println!(
                     "#   {what} phases, mean ms per call: pack {:.3}, upload+submit {:.3}, device wait {:.3}, \
-                     read-back copy {:.3}, unpack {:.3}",
+                     read-back mapping {:.3}, unpack {:.3}; host CPU time per frame: pack {:.3} us + unpack \
+                     {:.3} us = {:.3} us",
                     per(p.pack_s),
                     per(p.submit_s),
                     per(p.wait_s),
                     per(p.read_s),
-                    per(p.unpack_s)
+                    per(p.unpack_s),
+                    us(p.pack_cpu_s),
+                    us(p.unpack_cpu_s),
+                    us(p.pack_cpu_s + p.unpack_cpu_s)
                 );
             }
         }
     }
     Ok(0)
+}
+
+/// Batches above this size skip the owned-result linearize (24 KB per frame).
+const FULL_COPY_MAX: usize = 100_000;
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Linearize,
+    Handoff,
+    Energy,
+}
+
+/// What the trust-region solver copies out of a handed-over model before its QP reads `H`
+/// in place: `E`, the statistics and `g`.
+struct Handoff {
+    energy: f64,
+    marker_sq_sum: f64,
+    markers_used: usize,
+    g: Vec<f64>,
+}
+
+impl Handoff {
+    fn new(np: usize) -> Handoff {
+        Handoff { energy: 0.0, marker_sq_sum: 0.0, markers_used: 0, g: vec![0.0; np] }
+    }
+}
+
+impl GnSink for Handoff {
+    fn take(&mut self, view: &GnView<'_>) {
+        self.energy = view.energy;
+        self.marker_sq_sum = view.marker_sq_sum;
+        self.markers_used = view.markers_used;
+        view.g.copy_to(&mut self.g);
+    }
 }
 
 fn median(v: &mut [f64]) -> f64 {

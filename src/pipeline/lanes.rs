@@ -2,15 +2,16 @@
 //!
 //! Each lane walks the frames of one segment in order, warm-starting every frame from the
 //! previous solution, exactly as a per-segment loop over [`FrameSolver::solve`] would. A round
-//! is: one batched `(H, g, E)` evaluation of every lane that needs one, the follow-up QPs of
-//! those lanes on rayon's pool, then one batched `E` evaluation of every trial point and the
+//! is: one batched `(H, g, E)` evaluation of every lane that needs one, each lane's follow-up QP
+//! solved as its model is handed over (read where the backend left it: a CPU workspace or the
+//! mapped read-back buffer, [`BatchBackend::linearize_into`]), then one batched `E` evaluation of every trial point and the
 //! accept/reject decisions on the pool. Lanes whose frame is done start their next frame (a cold
 //! start, on the CPU, at the beginning of a segment); lanes whose segment ends take the next
 //! segment from the queue. The solver never knows which [`BatchBackend`] evaluated.
 
 use crate::io::MarkerTrial;
 use crate::kinematics::assembly::{fold_tracking_reference, Evaluator, FrameProblem};
-use crate::kinematics::backend::{BackendError, BatchBackend, EnergyEval, FrameModel};
+use crate::kinematics::backend::{BackendError, BatchBackend, EnergyEval, GnSink, GnView};
 use crate::solve::init::multi_start;
 use crate::solve::presolve::outlier_threshold;
 use crate::solve::trqp::{FrameIteration, Next};
@@ -187,14 +188,12 @@ pub fn run_lanes<E: From<BackendError>>(
     backend: &mut dyn BatchBackend,
     done: &mut dyn FnMut(usize, FrameResult) -> Result<(), E>,
 ) -> Result<(), E> {
-    let (np, nm) = (eval.proxy.np(), eval.model.markers.len());
     let mut queue: VecDeque<(usize, usize)> = segments.iter().copied().filter(|(a, b)| b > a).collect();
     let n_lanes = lanes.max(1).min(queue.len().max(1));
     let mut lanes: Vec<Lane<'_>> = (0..n_lanes).map(|_| Lane::new(eval, settings)).collect();
     let presolve = settings.presolve == Presolve::Always;
-    let mut models: Vec<FrameModel> = (0..n_lanes).map(|_| FrameModel::new(np, nm)).collect();
     let mut energies = vec![EnergyEval::default(); n_lanes];
-    let mut px: Vec<f64> = Vec::with_capacity(n_lanes * np);
+    let mut px: Vec<f64> = Vec::with_capacity(n_lanes * eval.proxy.np());
     loop {
         // Record finished frames; hand out segments (in queue order); start next frames.
         for lane in lanes.iter_mut() {
@@ -227,24 +226,8 @@ pub fn run_lanes<E: From<BackendError>>(
             break;
         }
 
-        // One batched linearisation, then the QPs.
-        let k = batch(
-            &lanes,
-            |n| matches!(n, Next::Linearize),
-            inp,
-            &mut px,
-            |l| &l.p,
-            |f, p| backend.linearize(f, p, &mut models[..f.len()]),
-        )?;
-        if k > 0 {
-            let mut active: Vec<&mut Lane<'_>> =
-                lanes.iter_mut().filter(|l| matches!(l.next, Next::Linearize)).collect();
-            active.par_iter_mut().zip(models[..k].par_iter_mut()).for_each(|(l, m)| {
-                std::mem::swap(&mut l.solver.gn, &mut m.gn);
-                let it = l.it.as_mut().expect("a lane that needs an evaluation is iterating");
-                l.next = l.solver.linearized(it, &l.p);
-            });
-        }
+        // One batched linearisation; each lane's QP reads its model where the backend left it.
+        linearize_round(&mut lanes, inp, &mut px, backend)?;
         // One batched energy evaluation of the trial points, then accept or reject.
         let k = batch(
             &lanes,
@@ -336,6 +319,50 @@ pub fn resolve_outliers_above(
 /// The result of a frame that was solved (not bridged).
 fn solved(r: &Option<FrameResult>) -> Option<&FrameResult> {
     r.as_ref().filter(|r| r.1.status != FrameStatus::TooFewMarkers)
+}
+
+/// The part of a lane that takes its Gauss–Newton model and solves the step QP from it.
+struct LaneSink<'a, 'e> {
+    solver: &'a mut FrameSolver<'e>,
+    it: &'a mut Option<FrameIteration>,
+    next: &'a mut Next,
+    p: &'a [f64],
+}
+
+impl GnSink for LaneSink<'_, '_> {
+    fn take(&mut self, view: &GnView<'_>) {
+        let it = self.it.as_mut().expect("a lane that needs an evaluation is iterating");
+        *self.next = self.solver.linearized_view(it, self.p, view);
+    }
+}
+
+/// One batched `(H, g, E)` of every lane that needs one, each lane's step QP solved as its model
+/// is handed over ([`BatchBackend::linearize_into`]).
+fn linearize_round(
+    lanes: &mut [Lane<'_>],
+    inp: &TrialInputs<'_>,
+    px: &mut Vec<f64>,
+    backend: &mut dyn BatchBackend,
+) -> Result<(), BackendError> {
+    px.clear();
+    let mut frames = Vec::new();
+    let mut sinks = Vec::new();
+    for l in lanes.iter_mut().filter(|l| matches!(l.next, Next::Linearize)) {
+        let Lane { solver, it, next, p, obs, reference, .. } = l;
+        frames.push(FrameProblem {
+            observed: obs,
+            marker_weights: inp.marker_weights,
+            tracking_ref: reference,
+            tracking_weights: inp.tracking_weights_all,
+        });
+        px.extend_from_slice(p);
+        sinks.push(LaneSink { solver, it, next, p });
+    }
+    if frames.is_empty() {
+        return Ok(());
+    }
+    let mut dyns: Vec<&mut dyn GnSink> = sinks.iter_mut().map(|s| s as &mut dyn GnSink).collect();
+    backend.linearize_into(&frames, px, &mut dyns)
 }
 
 /// Gathers the lanes that need `what` into one batch and evaluates it; returns its size.

@@ -13,7 +13,7 @@
 use super::qp::{LinearConstraints, QpProblem, QpSolver};
 use super::settings::SolverSettings;
 use crate::kinematics::assembly::{EvalWorkspace, Evaluator, FrameProblem, GaussNewton};
-use crate::kinematics::backend::EnergyEval;
+use crate::kinematics::backend::{EnergyEval, GnView, HessianView};
 use crate::model::proxy::ProxyKind;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
@@ -56,7 +56,10 @@ pub struct FrameSolver<'e> {
     pub settings: SolverSettings,
     qp: Box<dyn QpSolver>,
     pub ws: EvalWorkspace,
+    /// `H + W_damp` of the current step (off-diagonal: `H` as loaded at the linearisation).
     h: DMatrix<f64>,
+    /// The undamped diagonal of `H` at the last linearisation.
+    h_diag: DVector<f64>,
     damp: DVector<f64>,
     lb: DVector<f64>,
     ub: DVector<f64>,
@@ -115,6 +118,7 @@ impl<'e> FrameSolver<'e> {
             qp,
             ws: EvalWorkspace::new(eval.model, eval.proxy),
             h: DMatrix::zeros(np, np),
+            h_diag: DVector::zeros(np),
             damp: DVector::zeros(np),
             lb: DVector::zeros(np),
             ub: DVector::zeros(np),
@@ -199,6 +203,31 @@ impl<'e> FrameSolver<'e> {
 
     /// Continues after `self.gn` was set to the Gauss–Newton model at `p`.
     pub fn linearized(&mut self, it: &mut FrameIteration, p: &[f64]) -> Next {
+        if let Some(done) = self.first_checks(it) {
+            return done;
+        }
+        load_h(&HessianView::Full(&self.gn.h), &mut self.h, &mut self.h_diag);
+        self.step(it, p)
+    }
+
+    /// As [`FrameSolver::linearized`], with the model read from `view` where a backend left it
+    /// (`g` and the statistics are copied into [`FrameSolver::gn`]; `H` goes straight into the
+    /// step's matrix and `gn.h` is left as it was).
+    pub fn linearized_view(&mut self, it: &mut FrameIteration, p: &[f64], view: &GnView<'_>) -> Next {
+        let gn = &mut self.gn;
+        gn.energy = view.energy;
+        gn.marker_sq_sum = view.marker_sq_sum;
+        gn.markers_used = view.markers_used;
+        view.g.copy_to(gn.g.as_mut_slice());
+        if let Some(done) = self.first_checks(it) {
+            return done;
+        }
+        load_h(&view.h, &mut self.h, &mut self.h_diag);
+        self.step(it, p)
+    }
+
+    /// The tests made once per frame, at its first linearisation.
+    fn first_checks(&mut self, it: &mut FrameIteration) -> Option<Next> {
         if !it.started {
             it.started = true;
             let s = &self.settings;
@@ -207,14 +236,14 @@ impl<'e> FrameSolver<'e> {
             it.stats.markers_used = self.gn.markers_used;
             if it.stats.markers_used < s.min_markers {
                 it.stats.status = FrameStatus::TooFewMarkers;
-                return Next::Done(it.stats);
+                return Some(Next::Done(it.stats));
             }
             if it.stats.rmse_m < s.residual_tol_m {
                 it.stats.status = FrameStatus::Converged;
-                return Next::Done(it.stats);
+                return Some(Next::Done(it.stats));
             }
         }
-        self.step(it, p)
+        None
     }
 
     /// Solves the step QP at `p` with `self.gn` and sets [`FrameSolver::trial`].
@@ -227,11 +256,11 @@ impl<'e> FrameSolver<'e> {
         let gn = &self.gn;
         let np = p.len();
         it.shrink_used = it.shrink;
-        self.h.copy_from(&gn.h);
+        // Off the diagonal `self.h` holds H as loaded; the diagonal is re-damped each step.
         for k in 0..np {
-            let d = it.lambda * gn.h[(k, k)].max(s.damping_floor);
+            let d = it.lambda * self.h_diag[k].max(s.damping_floor);
             self.damp[k] = d;
-            self.h[(k, k)] += d;
+            self.h[(k, k)] = self.h_diag[k] + d;
             let b = if self.free[k] { self.step_box[k] * it.shrink * self.step_multiplier } else { 0.0 };
             self.lb[k] = (-b).max(self.lo[k] - p[k]);
             self.ub[k] = b.min(self.hi[k] - p[k]);
@@ -337,6 +366,15 @@ pub fn step_constraints(proxy: &crate::model::proxy::ProxyMap, p: &[f64]) -> Lin
         c.hi[i] = pc.hi - v;
     }
     c
+}
+
+/// `H` into the step matrix `h` (both triangles) and its diagonal into `diag`, for the steps of
+/// one linearisation.
+fn load_h(src: &HessianView<'_>, h: &mut DMatrix<f64>, diag: &mut DVector<f64>) {
+    src.write_full(h);
+    for k in 0..diag.len() {
+        diag[k] = h[(k, k)];
+    }
 }
 
 /// `xᵀ H x` without allocating.

@@ -8,6 +8,7 @@
 //! body-scale differences rather than lab coordinates.
 
 mod adapter;
+mod host;
 pub mod pack;
 mod shader;
 mod words;
@@ -17,8 +18,7 @@ pub use adapter::{list_adapters, searched_backends, AdapterSummary};
 pub use shader::{shader_source, Precision, REAL_F32, REAL_F64, SHADER};
 
 use super::assembly::{Evaluator, FrameProblem};
-use super::backend::{check_shape, BackendError, BatchBackend, EnergyEval, FrameModel};
-use rayon::prelude::*;
+use super::backend::{check_shape, BackendError, BatchBackend, EnergyEval, FrameModel, GnSink};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -33,16 +33,20 @@ pub const DEFAULT_CAP: usize = 32_768;
 /// the host packs the next), so `wait_s` is the time the host had nothing else to do.
 #[derive(Clone, Copy, Debug, Default, serde::Serialize)]
 pub struct PhaseTimes {
-    /// Host: reference points and structure-of-arrays packing of the inputs.
+    /// Host: reference points and packing of the inputs into the mapped upload range (wall).
     pub pack_s: f64,
+    /// CPU time of the packing, summed over threads.
+    pub pack_cpu_s: f64,
     /// Host: queue writes (upload), encoding and submission.
     pub submit_s: f64,
     /// Waiting for the device and for the read-back mapping.
     pub wait_s: f64,
-    /// Host: copying the mapped results out.
+    /// Host: mapping the read-back range (the results are read in place, not copied).
     pub read_s: f64,
-    /// Host: unpacking `(H, g, E, x̂)` into the per-frame results.
+    /// Host: handing each frame's mapped results to its sink (wall; includes what the sinks do).
     pub unpack_s: f64,
+    /// CPU time of the hand-out, summed over threads.
+    pub unpack_cpu_s: f64,
     /// Frames evaluated.
     pub frames: u64,
 }
@@ -59,6 +63,11 @@ pub struct WgpuBackend {
     energy: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
     input: wgpu::Buffer,
+    /// Two persistently mapped upload buffers: the host packs one chunk into one while the
+    /// other is copied to `input`.
+    upload: [wgpu::Buffer; 2],
+    /// Re-mapping of an upload buffer after its copy was submitted.
+    upload_wait: [Option<MapWait>; 2],
     output: wgpu::Buffer,
     /// Two read-back buffers: one chunk is read while the next one runs.
     staging: [wgpu::Buffer; 2],
@@ -68,8 +77,8 @@ pub struct WgpuBackend {
     np: usize,
     nm: usize,
     precision: Precision,
-    host_in: words::Words,
-    host_out: words::Words,
+    /// Per-piece scratch of one input block while packing.
+    pack_scratch: Vec<host::PackScratch>,
     /// Reference point of each frame of the two chunks in flight (f32-representable, in f64).
     refs: [Vec<[f64; 3]>; 2],
     errors: ErrorSlot,
@@ -159,7 +168,7 @@ impl WgpuBackend {
             Precision::F32 => 4,
             Precision::F64 => 8,
         };
-        let widest = word * rows.input.max(rows.scratch).max(rows.output) as u64;
+        let widest = word * rows.input.max(rows.scratch).max(rows.output + 4) as u64;
         let bind = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         let by_limits = (bind / widest) as usize;
         let by_groups = limits.max_compute_workgroups_per_dimension as usize * 64;
@@ -244,8 +253,17 @@ impl WgpuBackend {
         };
         use wgpu::BufferUsages as U;
         let input = buffer("input", cap * rows.input, U::STORAGE | U::COPY_DST);
+        let upload = [0, 1].map(|_| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("upload"),
+                size: word * (cap * rows.input) as u64,
+                usage: U::MAP_WRITE | U::COPY_SRC,
+                mapped_at_creation: true,
+            })
+        });
         let scratch = buffer("scratch", cap * rows.scratch, U::STORAGE);
-        let output = buffer("output", cap * rows.output, U::STORAGE | U::COPY_SRC);
+        // Output: the compact energy rows (4 words per frame), then one block per frame.
+        let output = buffer("output", cap * (rows.output + 4), U::STORAGE | U::COPY_SRC);
         let staging = [0, 1].map(|_| buffer("staging", cap * rows.output, U::MAP_READ | U::COPY_DST));
         // Four u32: whatever the precision, 16 bytes.
         let params = device.create_buffer(&wgpu::BufferDescriptor {
@@ -277,6 +295,8 @@ impl WgpuBackend {
             energy,
             bind_group,
             input,
+            upload,
+            upload_wait: [None, None],
             output,
             staging,
             params,
@@ -285,8 +305,7 @@ impl WgpuBackend {
             np: eval.proxy.np(),
             nm: eval.model.markers.len(),
             precision,
-            host_in: words::Words::new(precision),
-            host_out: words::Words::new(precision),
+            pack_scratch: vec![host::PackScratch::default(); 2 * rayon::current_num_threads().max(1)],
             refs: [vec![[0.0; 3]; cap], vec![[0.0; 3]; cap]],
             errors,
             phases: PhaseTimes::default(),
@@ -297,83 +316,98 @@ impl WgpuBackend {
         BackendError::Device { adapter: self.adapter.name.clone(), message }
     }
 
-    /// Packs frames into `host_in` (structure of arrays, stride [`stride`]): first each frame's
-    /// reference point, then row by row in parallel, so that every row is written contiguously.
-    fn pack_chunk(&mut self, frames: &[FrameProblem<'_>], proxies: &[f64], slot: usize) {
-        let (cap, r, np, nm) = (stride(frames.len()), self.rows, self.np, self.nm);
-        let used = |fr: &FrameProblem<'_>, m: usize| {
-            fr.marker_weights[m] > 0.0 && !fr.observed[3 * m..3 * m + 3].iter().any(|v| v.is_nan())
-        };
-        // Reference point: the centroid of the observed markers, rounded to f32 (exact in both
-        // precisions).
-        let refs = &mut self.refs[slot];
-        refs[..frames.len()].par_iter_mut().zip(frames).for_each(|(c, fr)| {
-            let (mut sum, mut n) = ([0.0f64; 3], 0usize);
-            for m in (0..nm).filter(|&m| used(fr, m)) {
-                for (a, s) in sum.iter_mut().enumerate() {
-                    *s += fr.observed[3 * m + a];
-                }
-                n += 1;
-            }
-            *c = sum.map(|s| if n > 0 { (s / n as f64) as f32 as f64 } else { 0.0 });
-        });
-        let refs = &self.refs[slot];
-        self.host_in.ensure(cap * r.input);
-        self.host_in.fill_rows(r.input, cap, frames.len(), |row, i| {
-            let fr = &frames[i];
-            if row < r.i_obs {
-                proxies[i * np + row - r.i_p]
-            } else if row < r.i_mw {
-                let (m, a) = ((row - r.i_obs) / 3, (row - r.i_obs) % 3);
-                if used(fr, m) {
-                    fr.observed[3 * m + a] - refs[i][a]
-                } else {
-                    0.0
-                }
-            } else if row < r.i_tref {
-                let m = row - r.i_mw;
-                if used(fr, m) {
-                    fr.marker_weights[m]
-                } else {
-                    0.0
-                }
-            } else if row < r.i_tw {
-                fr.tracking_ref.get(row - r.i_tref).copied().unwrap_or(0.0)
-            } else if row < r.i_c {
-                fr.tracking_weights.get(row - r.i_tw).copied().unwrap_or(0.0)
-            } else {
-                refs[i][row - r.i_c]
-            }
-        });
+    /// Bytes per shader word.
+    fn word(&self) -> usize {
+        match self.precision {
+            Precision::F32 => 4,
+            Precision::F64 => 8,
+        }
     }
 
-    /// Uploads the packed chunk of `n` frames, dispatches it and starts reading back its first
-    /// `rows` output rows into staging buffer `slot`.
-    fn submit(&mut self, slot: usize, n: usize, linearize: bool) -> Pending {
-        let rows = if linearize { self.rows.output } else { 3 };
+    /// Packs `frames` straight into the mapped upload buffer `slot` (frame-major),
+    /// dispatches them and starts reading back their results into staging buffer `slot`:
+    /// `(E, Σ‖r‖², used)` rows for `energy`, whole output blocks for `linearize`.
+    fn submit(
+        &mut self,
+        slot: usize,
+        frames: &[FrameProblem<'_>],
+        proxies: &[f64],
+        linearize: bool,
+    ) -> Result<Pending, BackendError> {
+        let (n, word, r) = (frames.len(), self.word(), self.rows);
+        let t = Instant::now();
+        let size = std::num::NonZeroU64::new((n * r.input * word) as u64)
+            .ok_or_else(|| BackendError::Shape("an empty chunk".into()))?;
+        if let Some((index, rx)) = self.upload_wait[slot].take() {
+            let ready = match rx.try_recv() {
+                Ok(r) => Some(r),
+                Err(_) => {
+                    self.device
+                        .poll(wgpu::PollType::Wait { submission_index: Some(index), timeout: None })
+                        .map_err(|e| self.fail(format!("waiting for the device: {e}")))?;
+                    rx.recv().ok()
+                }
+            };
+            match ready {
+                Some(Ok(())) => {}
+                Some(Err(e)) => return Err(self.fail(format!("mapping the upload buffer: {e}"))),
+                None => return Err(self.fail("the upload buffer was never mapped".into())),
+            }
+        }
+        let cpu = {
+            let mut view = self.upload[slot]
+                .slice(..size.get())
+                .get_mapped_range_mut()
+                .map_err(|e| self.fail(format!("writing the inputs: {e:?}")))?;
+            let job = host::PackJob { rows: r, np: self.np, nm: self.nm, frames, proxies };
+            let (refs, scratch) = (&mut self.refs[slot], &mut self.pack_scratch);
+            match self.precision {
+                Precision::F32 => host::pack::<f32>(&job, view.slice(..), refs, scratch),
+                Precision::F64 => host::pack::<f64>(&job, view.slice(..), refs, scratch),
+            }
+        };
+        self.upload[slot].unmap();
+        self.phases.pack_s += t.elapsed().as_secs_f64();
+        self.phases.pack_cpu_s += cpu;
+        let t = Instant::now();
         let st = stride(n);
-        // Queue writes are ordered after earlier submissions, so the chunk in flight keeps its data.
-        self.queue.write_buffer(&self.input, 0, self.host_in.bytes(st * self.rows.input));
         self.queue.write_buffer(&self.params, 0, bytemuck::cast_slice(&[n as u32, st as u32, 0, 0]));
         let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("chunk") });
+        enc.copy_buffer_to_buffer(&self.upload[slot], 0, &self.input, 0, size.get());
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
             pass.set_pipeline(if linearize { &self.linearize } else { &self.energy });
             pass.set_bind_group(0, &self.bind_group, &[]);
             pass.dispatch_workgroups(n.div_ceil(64) as u32, 1, 1);
         }
-        let bytes = (self.host_in.word() * rows * st) as u64;
-        enc.copy_buffer_to_buffer(&self.output, 0, &self.staging[slot], 0, bytes);
+        let (from, bytes) = if linearize {
+            ((4 * self.cap * word) as u64, (n * r.output * word) as u64)
+        } else {
+            (0, (4 * n * word) as u64)
+        };
+        enc.copy_buffer_to_buffer(&self.output, from, &self.staging[slot], 0, bytes);
         let index = self.queue.submit([enc.finish()]);
+        let (utx, urx) = std::sync::mpsc::channel();
+        self.upload[slot].slice(..).map_async(wgpu::MapMode::Write, move |r| {
+            let _ = utx.send(r);
+        });
+        self.upload_wait[slot] = Some((index.clone(), urx));
         let (tx, rx) = std::sync::mpsc::channel();
         self.staging[slot].slice(..bytes).map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
         });
-        Pending { slot, rows, stride: st, index, rx }
+        self.phases.submit_s += t.elapsed().as_secs_f64();
+        Ok(Pending { slot, bytes, index, rx })
     }
 
-    /// Waits for a submitted chunk and copies its results into `host_out`.
-    fn finish(&mut self, p: Pending) -> Result<(), BackendError> {
+    /// Waits for a submitted chunk, hands its mapped results to `unpack` (which returns the CPU
+    /// time it took) and unmaps them.
+    fn finish(
+        &mut self,
+        p: Pending,
+        range: std::ops::Range<usize>,
+        unpack: &mut impl FnMut(std::ops::Range<usize>, &[u8], &[[f64; 3]]) -> f64,
+    ) -> Result<(), BackendError> {
         let t = Instant::now();
         self.device
             .poll(wgpu::PollType::Wait { submission_index: Some(p.index), timeout: None })
@@ -384,55 +418,46 @@ impl WgpuBackend {
             Err(_) => return Err(self.fail("the results were never mapped".into())),
         }
         self.phases.wait_s += t.elapsed().as_secs_f64();
-        let t = Instant::now();
-        let words = p.rows * p.stride;
-        {
-            let slice = self.staging[p.slot].slice(..(self.host_out.word() * words) as u64);
-            let view = slice.get_mapped_range().map_err(|e| self.fail(format!("reading the results: {e:?}")))?;
-            self.host_out.copy_from_bytes(&view);
-        }
-        self.staging[p.slot].unmap();
-        self.phases.read_s += t.elapsed().as_secs_f64();
         if let Some(e) = self.errors.lock().unwrap_or_else(|p| p.into_inner()).take() {
+            self.staging[p.slot].unmap();
             return Err(self.fail(e));
         }
+        let t = Instant::now();
+        let cpu = {
+            let view = self.staging[p.slot]
+                .slice(..p.bytes)
+                .get_mapped_range()
+                .map_err(|e| self.fail(format!("reading the results: {e:?}")))?;
+            self.phases.read_s += t.elapsed().as_secs_f64();
+            unpack(range, &view, &self.refs[p.slot])
+        };
+        self.staging[p.slot].unmap();
+        self.phases.unpack_s += t.elapsed().as_secs_f64();
+        self.phases.unpack_cpu_s += cpu;
         Ok(())
     }
 
     /// Runs `frames` chunk by chunk, two chunks in flight: while the device works on chunk
-    /// `i`, the host packs chunk `i + 1` and unpacks chunk `i − 1` with `unpack(range, self)`.
+    /// `i`, the host packs chunk `i + 1` and hands out the results of chunk `i − 1` with
+    /// `unpack(range, mapped bytes, reference points)`.
     fn run(
         &mut self,
         frames: &[FrameProblem<'_>],
         proxies: &[f64],
         linearize: bool,
-        mut unpack: impl FnMut(std::ops::Range<usize>, &WgpuBackend, usize, usize),
+        mut unpack: impl FnMut(std::ops::Range<usize>, &[u8], &[[f64; 3]]) -> f64,
     ) -> Result<(), BackendError> {
         let (n, cap, np) = (frames.len(), self.cap, self.np);
         let mut in_flight: Option<(Pending, std::ops::Range<usize>)> = None;
         for c in 0..n.div_ceil(cap) {
             let (a, b) = (c * cap, ((c + 1) * cap).min(n));
-            let slot = c % 2;
-            let t = Instant::now();
-            self.pack_chunk(&frames[a..b], &proxies[a * np..b * np], slot);
-            self.phases.pack_s += t.elapsed().as_secs_f64();
-            let t = Instant::now();
-            let pending = self.submit(slot, b - a, linearize);
-            self.phases.submit_s += t.elapsed().as_secs_f64();
+            let pending = self.submit(c % 2, &frames[a..b], &proxies[a * np..b * np], linearize)?;
             if let Some((p, range)) = in_flight.replace((pending, a..b)) {
-                let (s, st) = (p.slot, p.stride);
-                self.finish(p)?;
-                let t = Instant::now();
-                unpack(range, self, s, st);
-                self.phases.unpack_s += t.elapsed().as_secs_f64();
+                self.finish(p, range, &mut unpack)?;
             }
         }
         if let Some((p, range)) = in_flight {
-            let (s, st) = (p.slot, p.stride);
-            self.finish(p)?;
-            let t = Instant::now();
-            unpack(range, self, s, st);
-            self.phases.unpack_s += t.elapsed().as_secs_f64();
+            self.finish(p, range, &mut unpack)?;
         }
         self.phases.frames += n as u64;
         Ok(())
@@ -444,12 +469,15 @@ fn stride(n: usize) -> usize {
     n.div_ceil(64) * 64
 }
 
+/// An upload buffer being mapped again: the submission that last read it, and the callback's
+/// result.
+type MapWait = (wgpu::SubmissionIndex, std::sync::mpsc::Receiver<Result<(), wgpu::BufferAsyncError>>);
+
 /// A chunk submitted and being read back.
 struct Pending {
     slot: usize,
-    rows: usize,
-    /// Structure-of-arrays stride of this chunk.
-    stride: usize,
+    /// Bytes being read back.
+    bytes: u64,
     index: wgpu::SubmissionIndex,
     rx: std::sync::mpsc::Receiver<Result<(), wgpu::BufferAsyncError>>,
 }
@@ -469,32 +497,26 @@ impl BatchBackend for WgpuBackend {
         proxies: &[f64],
         out: &mut [FrameModel],
     ) -> Result<(), BackendError> {
-        let np = self.np;
-        check_shape(frames.len(), proxies.len(), out.len(), np)?;
-        self.run(frames, proxies, true, |range, me, slot, cap| {
-            let (r, ho, refs) = (me.rows, &me.host_out, &me.refs[slot]);
-            out[range].par_iter_mut().enumerate().for_each(|(i, o)| {
-                let gn = &mut o.gn;
-                gn.energy = ho.get(i);
-                gn.marker_sq_sum = ho.get(cap + i);
-                gn.markers_used = ho.get(2 * cap + i) as usize;
-                for k in 0..np {
-                    gn.g[k] = ho.get((r.o_g + k) * cap + i);
-                }
-                let mut e = r.o_h;
-                for k in 0..np {
-                    for l in k..np {
-                        let v = ho.get(e * cap + i);
-                        gn.h[(k, l)] = v;
-                        gn.h[(l, k)] = v;
-                        e += 1;
-                    }
-                }
-                let c = refs[i];
-                for (j, x) in o.markers.iter_mut().enumerate() {
-                    *x = ho.get((r.o_x + j) * cap + i) + c[j % 3];
-                }
-            });
+        let mut sinks: Vec<&mut dyn GnSink> = out.iter_mut().map(|o| o as &mut dyn GnSink).collect();
+        self.linearize_into(frames, proxies, &mut sinks)
+    }
+
+    fn linearize_into(
+        &mut self,
+        frames: &[FrameProblem<'_>],
+        proxies: &[f64],
+        sinks: &mut [&mut dyn GnSink],
+    ) -> Result<(), BackendError> {
+        let (np, rows, precision) = (self.np, self.rows, self.precision);
+        check_shape(frames.len(), proxies.len(), sinks.len(), np)?;
+        let pieces = 2 * rayon::current_num_threads().max(1);
+        self.run(frames, proxies, true, |range, bytes, refs| {
+            let per = range.len().div_ceil(pieces);
+            let sinks = &mut sinks[range];
+            match precision {
+                Precision::F32 => host::hand_out::<f32>(bytemuck::cast_slice(bytes), rows, np, refs, sinks, per),
+                Precision::F64 => host::hand_out::<f64>(bytemuck::cast_slice(bytes), rows, np, refs, sinks, per),
+            }
         })
     }
 
@@ -505,15 +527,14 @@ impl BatchBackend for WgpuBackend {
         out: &mut [EnergyEval],
     ) -> Result<(), BackendError> {
         check_shape(frames.len(), proxies.len(), out.len(), self.np)?;
-        self.run(frames, proxies, false, |range, me, _, cap| {
-            let ho = &me.host_out;
-            for (i, o) in out[range].iter_mut().enumerate() {
-                *o = EnergyEval {
-                    energy: ho.get(i),
-                    marker_sq_sum: ho.get(cap + i),
-                    markers_used: ho.get(2 * cap + i) as usize,
-                };
+        let precision = self.precision;
+        self.run(frames, proxies, false, |range, bytes, _| {
+            let t = host::thread_cpu_s();
+            match precision {
+                Precision::F32 => host::energies::<f32>(bytemuck::cast_slice(bytes), &mut out[range]),
+                Precision::F64 => host::energies::<f64>(bytemuck::cast_slice(bytes), &mut out[range]),
             }
+            host::thread_cpu_s() - t
         })
     }
 }

@@ -29,7 +29,8 @@ pub struct Rows {
     pub input: usize,
     /// Scratch: y, J_Φ, body and motion frames, one body's A/W and one marker's rows.
     pub scratch: usize,
-    /// Output: E, Σ‖r‖², markers used, g, packed upper H, model markers.
+    /// Output: E, Σ‖r‖², markers used, g, upper H packed column by column
+    /// ([`upper_index`](crate::kinematics::backend::upper_index)), model markers.
     pub output: usize,
     /// Offsets of the output sections.
     pub o_g: usize,
@@ -299,6 +300,8 @@ pub fn pack(model: &Model, proxy: &ProxyMap, layout: &Layout) -> Packed {
     for (name, v) in [("O_E", 0), ("O_SQ", 1), ("O_USED", 2), ("O_G", o_g), ("O_H", o_h), ("O_X", o_x)] {
         c(name, v);
     }
+    c("IN_ROWS", i_c + 3);
+    c("OUT_ROWS", o_x + 3 * nm);
     let rows = Rows {
         input: i_c + 3,
         scratch: scratch.max(1),

@@ -1,4 +1,5 @@
-//! Host-side mirrors of the shader's `real` arrays: f32 or f64 words, read and written as f64.
+//! Host-side shader words: the model's `real` array at upload, and [`Word`] for the per-frame
+//! blocks packed and read in place.
 
 use super::Precision;
 
@@ -10,35 +11,11 @@ pub(super) enum Words {
 }
 
 impl Words {
-    pub(super) fn new(precision: Precision) -> Words {
-        match precision {
-            Precision::F32 => Words::F32(Vec::new()),
-            Precision::F64 => Words::F64(Vec::new()),
-        }
-    }
-
     /// `values` converted to the precision's words.
     pub(super) fn from_f64(precision: Precision, values: &[f64]) -> Words {
         match precision {
             Precision::F32 => Words::F32(values.iter().map(|&v| v as f32).collect()),
             Precision::F64 => Words::F64(values.to_vec()),
-        }
-    }
-
-    /// Grows to at least `n` words (never shrinks).
-    pub(super) fn ensure(&mut self, n: usize) {
-        match self {
-            Words::F32(v) if v.len() < n => v.resize(n, 0.0),
-            Words::F64(v) if v.len() < n => v.resize(n, 0.0),
-            _ => {}
-        }
-    }
-
-    #[inline]
-    pub(super) fn get(&self, i: usize) -> f64 {
-        match self {
-            Words::F32(v) => v[i] as f64,
-            Words::F64(v) => v[i],
         }
     }
 
@@ -49,47 +26,39 @@ impl Words {
             Words::F64(v) => bytemuck::cast_slice(&v[..n]),
         }
     }
+}
 
-    /// Sets entry `i` of each of the first `rows` rows of length `stride` to `value(row, i)`,
-    /// for `i < n`, rows in parallel (each row's writes are contiguous).
-    pub(super) fn fill_rows(
-        &mut self,
-        rows: usize,
-        stride: usize,
-        n: usize,
-        value: impl Fn(usize, usize) -> f64 + Sync,
-    ) {
-        use rayon::prelude::*;
-        match self {
-            Words::F32(v) => v[..rows * stride].par_chunks_mut(stride).enumerate().for_each(|(row, w)| {
-                for (i, x) in w[..n].iter_mut().enumerate() {
-                    *x = value(row, i) as f32;
-                }
-            }),
-            Words::F64(v) => v[..rows * stride].par_chunks_mut(stride).enumerate().for_each(|(row, w)| {
-                for (i, x) in w[..n].iter_mut().enumerate() {
-                    *x = value(row, i);
-                }
-            }),
-        }
+/// A shader word on the host: f32 or f64, as plain bytes.
+pub(super) trait Word: bytemuck::Pod + Send + Sync {
+    fn of(v: f64) -> Self;
+    fn to_f64(self) -> f64;
+    fn reals(s: &[Self]) -> crate::kinematics::backend::Reals<'_>;
+}
+
+impl Word for f32 {
+    #[inline]
+    fn of(v: f64) -> f32 {
+        v as f32
     }
-
-    /// Bytes per word.
-    pub(super) fn word(&self) -> usize {
-        match self {
-            Words::F32(_) => 4,
-            Words::F64(_) => 8,
-        }
+    #[inline]
+    fn to_f64(self) -> f64 {
+        self as f64
     }
+    fn reals(s: &[f32]) -> crate::kinematics::backend::Reals<'_> {
+        crate::kinematics::backend::Reals::F32(s)
+    }
+}
 
-    /// Overwrites the first words with `bytes` read back from the device (mapped ranges are
-    /// aligned to `wgpu::MAP_ALIGNMENT`, 8 bytes, so both word sizes cast in place).
-    pub(super) fn copy_from_bytes(&mut self, bytes: &[u8]) {
-        let n = bytes.len() / self.word();
-        self.ensure(n);
-        match self {
-            Words::F32(v) => v[..n].copy_from_slice(bytemuck::cast_slice(bytes)),
-            Words::F64(v) => v[..n].copy_from_slice(bytemuck::cast_slice(bytes)),
-        }
+impl Word for f64 {
+    #[inline]
+    fn of(v: f64) -> f64 {
+        v
+    }
+    #[inline]
+    fn to_f64(self) -> f64 {
+        self
+    }
+    fn reals(s: &[f64]) -> crate::kinematics::backend::Reals<'_> {
+        crate::kinematics::backend::Reals::F64(s)
     }
 }

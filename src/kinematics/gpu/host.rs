@@ -1,0 +1,188 @@
+//! The host side of a chunk, without intermediate copies: frames are packed frame-major straight
+//! into the mapped upload buffer, and each frame's results are handed to its [`GnSink`] as views
+//! into the mapped read-back buffer. Both run on rayon's pool in a few contiguous pieces and
+//! return the CPU time they took (seconds, summed over threads, the device's threads excluded).
+//!
+//! Per-frame layouts (`pack::Rows`): input block of `rows.input` words at `frame · rows.input`;
+//! output block of `rows.output` words at `frame · rows.output` of the read-back copy.
+
+use super::pack::Rows;
+use super::words::Word;
+use crate::kinematics::assembly::FrameProblem;
+use crate::kinematics::backend::{EnergyEval, GnSink, GnView, HessianView};
+use rayon::prelude::*;
+
+/// CPU time of the calling thread (s).
+pub(super) fn thread_cpu_s() -> f64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: `ts` is a valid timespec to write to; the clock id is a constant Linux offers.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    if rc != 0 {
+        return 0.0;
+    }
+    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
+}
+
+/// Runs `f` and returns the CPU time of this thread it took (s).
+fn cpu<R>(f: impl FnOnce() -> R) -> (R, f64) {
+    let t = thread_cpu_s();
+    let r = f();
+    (r, thread_cpu_s() - t)
+}
+
+/// What packing a chunk needs besides its frames.
+pub(super) struct PackJob<'a, 'f> {
+    pub rows: Rows,
+    pub np: usize,
+    pub nm: usize,
+    pub frames: &'a [FrameProblem<'f>],
+    pub proxies: &'a [f64],
+}
+
+/// One frame's input block into `w` (length `rows.input`), with `mask` (length nm) as scratch;
+/// returns its reference point: the centroid of the observed and weighted markers, rounded to
+/// f32 (exact in both precisions). Unobserved markers get weight and offset 0.
+fn pack_frame<W: Word>(job: &PackJob<'_, '_>, i: usize, w: &mut [W], mask: &mut [bool]) -> [f64; 3] {
+    let (r, fr, nm, np) = (&job.rows, &job.frames[i], job.nm, job.np);
+    let (obs, mw) = (&fr.observed[..3 * nm], &fr.marker_weights[..nm]);
+    let (mut sum, mut n) = ([0.0f64; 3], 0usize);
+    for ((u, o), &wt) in mask.iter_mut().zip(obs.chunks_exact(3)).zip(mw) {
+        *u = wt > 0.0 && !(o[0].is_nan() | o[1].is_nan() | o[2].is_nan());
+        if *u {
+            sum[0] += o[0];
+            sum[1] += o[1];
+            sum[2] += o[2];
+            n += 1;
+        }
+    }
+    let c = sum.map(|s| if n > 0 { (s / n as f64) as f32 as f64 } else { 0.0 });
+    for (o, &p) in w[r.i_p..r.i_p + np].iter_mut().zip(&job.proxies[i * np..(i + 1) * np]) {
+        *o = W::of(p);
+    }
+    let (wo, wm) = w[r.i_obs..r.i_tref].split_at_mut(3 * nm);
+    for (((d, o), m), (&u, &wt)) in
+        wo.chunks_exact_mut(3).zip(obs.chunks_exact(3)).zip(wm.iter_mut()).zip(mask.iter().zip(mw))
+    {
+        if u {
+            d[0] = W::of(o[0] - c[0]);
+            d[1] = W::of(o[1] - c[1]);
+            d[2] = W::of(o[2] - c[2]);
+            *m = W::of(wt);
+        } else {
+            d.fill(W::of(0.0));
+            *m = W::of(0.0);
+        }
+    }
+    let ny = r.i_tw - r.i_tref;
+    let (wr, wt) = w[r.i_tref..r.i_c].split_at_mut(ny);
+    for (d, v) in [(wr, fr.tracking_ref), (wt, fr.tracking_weights)] {
+        let m = v.len().min(ny);
+        for (o, &x) in d[..m].iter_mut().zip(&v[..m]) {
+            *o = W::of(x);
+        }
+        d[m..].fill(W::of(0.0));
+    }
+    for a in 0..3 {
+        w[r.i_c + a] = W::of(c[a]);
+    }
+    c
+}
+
+/// Packs `job` into `dst` (the mapped upload range, `frames · rows.input` words) and the frames'
+/// reference points into `refs`, in `scratch.len()` pieces. Returns the CPU time (s).
+pub(super) fn pack<W: Word>(
+    job: &PackJob<'_, '_>,
+    mut dst: wgpu::WriteOnly<'_, [u8]>,
+    refs: &mut [[f64; 3]],
+    scratch: &mut [PackScratch],
+) -> f64 {
+    let n = job.frames.len();
+    let per = n.div_ceil(scratch.len().max(1)).max(1);
+    let block = job.rows.input * std::mem::size_of::<W>();
+    assert!(dst.len() >= n * block, "the upload range holds the chunk");
+    // `WriteOnly<[u8]>` is not `Send`; the pieces write disjoint ranges through its pointer.
+    let base = Dst(dst.as_raw_element_ptr());
+    let base = &base;
+    let refs = &mut refs[..n];
+    refs.par_chunks_mut(per)
+        .zip(scratch.par_iter_mut())
+        .enumerate()
+        .map(|(k, (r, s))| {
+            cpu(|| {
+                s.words.resize(job.rows.input.div_ceil(8 / std::mem::size_of::<W>()).max(1), 0);
+                s.mask.resize(job.nm, false);
+                let w: &mut [W] = &mut bytemuck::cast_slice_mut::<u64, W>(&mut s.words)[..job.rows.input];
+                let mask = &mut s.mask[..];
+                for (j, c) in r.iter_mut().enumerate() {
+                    let i = k * per + j;
+                    *c = pack_frame(job, i, w, mask);
+                    let bytes: &[u8] = bytemuck::cast_slice(w);
+                    // SAFETY: frame i's block `[i·block, (i+1)·block)` lies inside the mapped range
+                    // (asserted above), is written by this piece only, and is never read.
+                    unsafe { std::ptr::copy_nonoverlapping(bytes.as_ptr(), base.0.as_ptr().add(i * block), block) };
+                }
+            })
+            .1
+        })
+        .sum()
+}
+
+/// One packing piece's scratch: a frame's block (u64 storage, aligned for both word sizes) and
+/// its markers' used flags.
+#[derive(Clone, Debug, Default)]
+pub(super) struct PackScratch {
+    words: Vec<u64>,
+    mask: Vec<bool>,
+}
+
+/// The start of the mapped upload range, shared by the packing pieces.
+struct Dst(std::ptr::NonNull<u8>);
+// SAFETY: the pieces write disjoint byte ranges and nothing reads them while they run.
+unsafe impl Send for Dst {}
+unsafe impl Sync for Dst {}
+
+/// Hands frame `i`'s results (block `words[i · rows.output..]`, reference point `refs[i]`) to
+/// `sinks[i]`, in pieces of `per` frames. Returns the CPU time (s).
+pub(super) fn hand_out<W: Word>(
+    words: &[W],
+    rows: Rows,
+    np: usize,
+    refs: &[[f64; 3]],
+    sinks: &mut [&mut dyn GnSink],
+    per: usize,
+) -> f64 {
+    let nh = np * (np + 1) / 2;
+    sinks
+        .par_chunks_mut(per.max(1))
+        .enumerate()
+        .map(|(k, chunk)| {
+            cpu(|| {
+                for (j, s) in chunk.iter_mut().enumerate() {
+                    let i = k * per.max(1) + j;
+                    let b = &words[i * rows.output..(i + 1) * rows.output];
+                    s.take(&GnView {
+                        energy: b[0].to_f64(),
+                        marker_sq_sum: b[1].to_f64(),
+                        markers_used: b[2].to_f64() as usize,
+                        g: W::reals(&b[rows.o_g..rows.o_g + np]),
+                        h: HessianView::UpperColumns(W::reals(&b[rows.o_h..rows.o_h + nh])),
+                        markers: W::reals(&b[rows.o_x..]),
+                        reference: refs[i],
+                    });
+                }
+            })
+            .1
+        })
+        .sum()
+}
+
+/// Energies of a chunk from the compact `(E, Σ‖r‖², used, ·)` rows at `words[4 · i..]`.
+pub(super) fn energies<W: Word>(words: &[W], out: &mut [EnergyEval]) {
+    for (i, o) in out.iter_mut().enumerate() {
+        *o = EnergyEval {
+            energy: words[4 * i].to_f64(),
+            marker_sq_sum: words[4 * i + 1].to_f64(),
+            markers_used: words[4 * i + 2].to_f64() as usize,
+        };
+    }
+}
