@@ -8,22 +8,27 @@ use common::{random_model, rng};
 use rand::RngExt;
 use smocap::kinematics::assembly::{Evaluator, FrameProblem};
 use smocap::kinematics::backend::{BackendError, BatchBackend, CpuBackend, EnergyEval, FrameModel};
-use smocap::kinematics::gpu::{pack::pack, shader_source, Precision, WgpuBackend, REAL_F32, REAL_F64, SHADER};
+use smocap::kinematics::gpu::{
+    pack::pack, shader_source, Kernel, Precision, WgpuBackend, COMMON, COOPERATIVE, PER_FRAME, REAL_F32, REAL_F64,
+};
 use smocap::model::profile::Profile;
 use smocap::model::proxy::{ProxyKind, ProxyMap};
 use smocap::pipeline::Context;
 use std::process::Command;
 
-/// The wgpu backend (f32), or `None` with a printed note when wgpu finds no adapter at all.
-fn gpu(eval: &Evaluator<'_>, cap: usize) -> Option<WgpuBackend> {
-    gpu_in(eval, cap, Precision::F32)
+/// Both kernels, the default first.
+const KERNELS: [Kernel; 2] = [Kernel::Cooperative, Kernel::PerFrame];
+
+/// The wgpu backend (f32, `kernel`), or `None` with a printed note when wgpu finds no adapter.
+fn gpu(eval: &Evaluator<'_>, cap: usize, kernel: Kernel) -> Option<WgpuBackend> {
+    gpu_in(eval, cap, Precision::F32, kernel)
 }
 
 /// The wgpu backend in `precision`, or `None` with a printed note when no adapter offers it.
-fn gpu_in(eval: &Evaluator<'_>, cap: usize, precision: Precision) -> Option<WgpuBackend> {
-    match WgpuBackend::with_precision(eval, cap, precision) {
+fn gpu_in(eval: &Evaluator<'_>, cap: usize, precision: Precision, kernel: Kernel) -> Option<WgpuBackend> {
+    match WgpuBackend::with_options(eval, cap, precision, kernel) {
         Ok(b) => {
-            eprintln!("wgpu adapter: {}", b.adapter());
+            eprintln!("wgpu adapter: {}, {} kernel", b.adapter(), kernel.name());
             Some(b)
         }
         Err(BackendError::NoAdapter(why)) => {
@@ -49,13 +54,15 @@ fn every_shader_validates_with_naga_for_random_and_shipped_models() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "wgsl") {
             let text = std::fs::read_to_string(&path).unwrap();
-            assert!([SHADER, REAL_F32, REAL_F64].contains(&text.as_str()), "{} is not wired in", path.display());
+            let wired = [COMMON, COOPERATIVE, PER_FRAME, REAL_F32, REAL_F64];
+            assert!(wired.contains(&text.as_str()), "{} is not wired in", path.display());
         }
     }
     for (model, proxy) in &models {
         let eval = Evaluator::new(model, proxy);
-        for (cap, precision) in [(64, Precision::F32), (16_384, Precision::F32), (64, Precision::F64)] {
-            let src = shader_source(&pack(model, proxy, &eval.layout), cap, precision);
+        let configs = [(64, Precision::F32), (16_384, Precision::F32), (64, Precision::F64)];
+        for ((cap, precision), kernel) in configs.into_iter().flat_map(|c| KERNELS.map(|k| (c, k))) {
+            let src = shader_source(&pack(model, proxy, &eval.layout), cap, precision, kernel);
             let module = naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
             let flags = naga::valid::ValidationFlags::all();
             let caps = match precision {
@@ -228,11 +235,14 @@ fn wgpu_matches_cpu_on_random_models_with_gaps_weights_and_tracking() {
         let model = random_model(seed, 8);
         let proxy = ProxyMap::new(&model, &Profile::default_for(&model)).unwrap();
         let eval = Evaluator::new(&model, &proxy);
-        // A small chunk capacity, so that 150 frames take three dispatches.
-        let Some(mut gpu) = gpu(&eval, 64) else { return };
-        assert_eq!(gpu.chunk_capacity(), 64);
-        let batch = random_batch(&eval, 150, seed, 0.05, [0.0; 3]);
-        assert_parity_g(&format!("random model {seed}"), &parity(&eval, &mut gpu, &batch), G_TOL_FAR);
+        for kernel in KERNELS {
+            // A small chunk capacity, so that 150 frames take three dispatches.
+            let Some(mut gpu) = gpu(&eval, 64, kernel) else { return };
+            assert_eq!(gpu.chunk_capacity(), 64);
+            let batch = random_batch(&eval, 150, seed, 0.05, [0.0; 3]);
+            let what = format!("random model {seed}, {} kernel", kernel.name());
+            assert_parity_g(&what, &parity(&eval, &mut gpu, &batch), G_TOL_FAR);
+        }
     }
 }
 
@@ -240,16 +250,18 @@ fn wgpu_matches_cpu_on_random_models_with_gaps_weights_and_tracking() {
 fn wgpu_matches_cpu_on_the_shipped_model_near_and_far_from_the_solution() {
     let ctx = Context::shipped().unwrap();
     let eval = ctx.evaluator();
-    let Some(mut gpu) = gpu(&eval, 4096) else { return };
-    // Far: 5 cm misfits; near: 2 mm (where the solver spends its last iterations); in a lab
-    // whose origin is 4 m away.
-    for (what, spread, offset, g_tol) in [
-        ("shipped, 5 cm", 0.05, [0.0; 3], G_TOL_FAR),
-        ("shipped, 2 mm", 0.002, [0.0; 3], G_TOL_NEAR),
-        ("shipped, 2 mm at 4 m", 0.002, [4.0, 3.0, 0.0], G_TOL_NEAR),
-    ] {
-        let batch = random_batch(&eval, 300, 7, spread, offset);
-        assert_parity_g(what, &parity(&eval, &mut gpu, &batch), g_tol);
+    for kernel in KERNELS {
+        let Some(mut gpu) = gpu(&eval, 4096, kernel) else { return };
+        // Far: 5 cm misfits; near: 2 mm (where the solver spends its last iterations); in a lab
+        // whose origin is 4 m away.
+        for (what, spread, offset, g_tol) in [
+            ("shipped, 5 cm", 0.05, [0.0; 3], G_TOL_FAR),
+            ("shipped, 2 mm", 0.002, [0.0; 3], G_TOL_NEAR),
+            ("shipped, 2 mm at 4 m", 0.002, [4.0, 3.0, 0.0], G_TOL_NEAR),
+        ] {
+            let batch = random_batch(&eval, 300, 7, spread, offset);
+            assert_parity_g(&format!("{what}, {} kernel", kernel.name()), &parity(&eval, &mut gpu, &batch), g_tol);
+        }
     }
 }
 
@@ -259,8 +271,6 @@ fn wgpu_matches_cpu_on_the_shipped_model_near_and_far_from_the_solution() {
 fn wgpu_f64_matches_cpu_to_1e_12_where_the_adapter_offers_shader_f64() {
     let ctx = Context::shipped().unwrap();
     let shipped = ctx.evaluator();
-    let Some(mut gpu) = gpu_in(&shipped, 1024, Precision::F64) else { return };
-    assert_eq!(gpu.precision(), Precision::F64);
     let check = |what: &str, p: &Parity| {
         eprintln!(
             "{what} (f64): positions {:.2e} m, H {:.2e} (worst entry {:.2e}), g {:.2e}, E {:.2e}",
@@ -270,22 +280,27 @@ fn wgpu_f64_matches_cpu_to_1e_12_where_the_adapter_offers_shader_f64() {
             assert!(v <= 1e-12, "{what}: {name} differs by {v}");
         }
     };
-    for (what, spread, offset) in [
-        ("shipped, 5 cm", 0.05, [0.0; 3]),
-        ("shipped, 2 mm", 0.002, [0.0; 3]),
-        ("shipped, 2 mm at 4 m", 0.002, [4.0, 3.0, 0.0]),
-    ] {
-        check(what, &parity(&shipped, &mut gpu, &random_batch(&shipped, 300, 7, spread, offset)));
-    }
-    for seed in [31, 32] {
-        let model = random_model(seed, 8);
-        let proxy = ProxyMap::new(&model, &Profile::default_for(&model)).unwrap();
-        let eval = Evaluator::new(&model, &proxy);
-        let Some(mut gpu) = gpu_in(&eval, 64, Precision::F64) else { return };
-        check(
-            &format!("random model {seed}"),
-            &parity(&eval, &mut gpu, &random_batch(&eval, 150, seed, 0.05, [0.0; 3])),
-        );
+    for kernel in KERNELS {
+        let Some(mut gpu) = gpu_in(&shipped, 1024, Precision::F64, kernel) else { return };
+        assert_eq!(gpu.precision(), Precision::F64);
+        for (what, spread, offset) in [
+            ("shipped, 5 cm", 0.05, [0.0; 3]),
+            ("shipped, 2 mm", 0.002, [0.0; 3]),
+            ("shipped, 2 mm at 4 m", 0.002, [4.0, 3.0, 0.0]),
+        ] {
+            let batch = random_batch(&shipped, 300, 7, spread, offset);
+            check(&format!("{what}, {} kernel", kernel.name()), &parity(&shipped, &mut gpu, &batch));
+        }
+        for seed in [31, 32] {
+            let model = random_model(seed, 8);
+            let proxy = ProxyMap::new(&model, &Profile::default_for(&model)).unwrap();
+            let eval = Evaluator::new(&model, &proxy);
+            let Some(mut gpu) = gpu_in(&eval, 64, Precision::F64, kernel) else { return };
+            check(
+                &format!("random model {seed}, {} kernel", kernel.name()),
+                &parity(&eval, &mut gpu, &random_batch(&eval, 150, seed, 0.05, [0.0; 3])),
+            );
+        }
     }
 }
 
@@ -298,7 +313,7 @@ fn a_batch_of_the_wrong_shape_is_an_error_not_a_panic() {
     let mut out = vec![FrameModel::new(ctx.proxy.np(), ctx.model.markers.len()); 2];
     let mut cpu = CpuBackend::new(eval.clone());
     assert!(matches!(cpu.linearize(&frames, &batch.proxies, &mut out), Err(BackendError::Shape(_))));
-    if let Some(mut gpu) = gpu(&eval, 64) {
+    if let Some(mut gpu) = gpu(&eval, 64, Kernel::default()) {
         assert!(matches!(gpu.linearize(&frames, &batch.proxies, &mut out), Err(BackendError::Shape(_))));
     }
 }
@@ -356,7 +371,7 @@ fn the_same_trial_solved_on_wgpu_and_cpu_agrees_to_a_hundredth_of_a_millimetre_a
     // The backend holds the model: built once calibration registered the markers (as `solve` does).
     let ctx = generic.pinned_to(&cal);
     let eval = ctx.evaluator();
-    let Some(mut gpu) = gpu(&eval, 1024) else { return };
+    let Some(mut gpu) = gpu(&eval, 1024, Kernel::default()) else { return };
     let a = solve_trial_with(&ctx, "t", &s.trial, &cal, 2, 2, None).unwrap();
     let b = solve_trial_with(&ctx, "t", &s.trial, &cal, 2, 2, Some(&mut gpu)).unwrap();
     let map = smocap::pipeline::trial::match_markers(&ctx, "synthetic", &s.trial).unwrap().columns;

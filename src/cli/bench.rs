@@ -5,7 +5,7 @@
 use crate::kinematics::assembly::FrameProblem;
 use crate::kinematics::backend::{BatchBackend, CpuBackend, EnergyEval, FrameModel, GnSink, GnView};
 use crate::kinematics::gpu::PhaseTimes;
-use crate::pipeline::device::{choose, BackendChoice, Chosen};
+use crate::pipeline::device::{choose_with, BackendChoice, Chosen};
 use crate::pipeline::Context;
 use crate::synth::{synthesize, SynthOptions};
 use clap::Args;
@@ -28,12 +28,15 @@ pub struct BenchArgs {
     /// wgpu only: frames per dispatch (capped by the adapter's binding limits).
     #[arg(long, default_value_t = crate::kinematics::gpu::DEFAULT_CAP)]
     pub cap: usize,
+    /// wgpu only: how the shaders spread a frame's work over the GPU.
+    #[arg(long, value_enum, default_value_t = crate::kinematics::gpu::Kernel::default())]
+    pub kernel: crate::kinematics::gpu::Kernel,
 }
 
 pub fn run(a: BenchArgs) -> anyhow::Result<u8> {
     let ctx = Context::shipped()?;
     let eval = ctx.evaluator();
-    let mut chosen = choose(a.backend, &eval, a.cap)?;
+    let mut chosen = choose_with(a.backend, &eval, a.cap, a.kernel)?;
     if let Some(note) = chosen.note() {
         eprintln!("note: {note}");
     }

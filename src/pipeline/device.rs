@@ -70,12 +70,21 @@ impl Chosen {
 /// Picks the backend for `eval`'s model, with at most `cap` frames per wgpu dispatch. Errors only
 /// for `wgpu` without a usable adapter.
 pub fn choose(choice: BackendChoice, eval: &Evaluator<'_>, cap: usize) -> Result<Chosen, BackendError> {
+    choose_with(choice, eval, cap, gpu::Kernel::default())
+}
+
+/// As [`choose`], with the given shader [`gpu::Kernel`] where wgpu is chosen.
+pub fn choose_with(
+    choice: BackendChoice,
+    eval: &Evaluator<'_>,
+    cap: usize,
+    kernel: gpu::Kernel,
+) -> Result<Chosen, BackendError> {
+    use gpu::Precision::{F32, F64};
     match choice {
         BackendChoice::Cpu => Ok(Chosen::Cpu { note: None }),
-        BackendChoice::Wgpu => Ok(Chosen::Wgpu(Box::new(WgpuBackend::new(eval, cap)?))),
-        BackendChoice::WgpuF64 => {
-            Ok(Chosen::Wgpu(Box::new(WgpuBackend::with_precision(eval, cap, gpu::Precision::F64)?)))
-        }
+        BackendChoice::Wgpu => Ok(Chosen::Wgpu(Box::new(WgpuBackend::with_options(eval, cap, F32, kernel)?))),
+        BackendChoice::WgpuF64 => Ok(Chosen::Wgpu(Box::new(WgpuBackend::with_options(eval, cap, F64, kernel)?))),
         BackendChoice::Auto => {
             let adapters = gpu::list_adapters();
             let Some(best) = adapters.first() else {
@@ -94,7 +103,7 @@ pub fn choose(choice: BackendChoice, eval: &Evaluator<'_>, cap: usize) -> Result
                     )),
                 });
             }
-            match WgpuBackend::new(eval, cap) {
+            match WgpuBackend::with_options(eval, cap, F32, kernel) {
                 Ok(b) => Ok(Chosen::Wgpu(Box::new(b))),
                 Err(e) => Ok(Chosen::Cpu {
                     note: Some(format!("backend auto: {best} could not be used ({e}); using the CPU backend")),

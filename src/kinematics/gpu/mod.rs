@@ -1,13 +1,15 @@
-//! The wgpu compute backend: `shaders/batch.wgsl` evaluates one frame per invocation, in f32 or,
-//! where the adapter offers `SHADER_F64` and it is asked for, in f64 ([`Precision`]).
+//! The wgpu compute backend: the shaders evaluate a frame per workgroup (the default
+//! [`Kernel::Cooperative`]) or per invocation ([`Kernel::PerFrame`]), in f32 or, where the
+//! adapter offers `SHADER_F64` and it is asked for, in f64 ([`Precision`]).
 //!
 //! The model is uploaded once ([`pack`]); each batch is cut into chunks of at most `cap` frames
 //! (what one storage binding holds, from the adapter's limits), each chunk is packed as
-//! structure-of-arrays, dispatched, and read back. Positions travel relative to a per-frame
+//! frame-major blocks straight into a mapped upload buffer, dispatched, and read back in place. Positions travel relative to a per-frame
 //! reference point (the centroid of the observed markers, rounded to f32) so that f32 resolves
 //! body-scale differences rather than lab coordinates.
 
 mod adapter;
+mod gather;
 mod host;
 pub mod pack;
 mod shader;
@@ -15,17 +17,17 @@ mod words;
 
 use adapter::best_adapter;
 pub use adapter::{list_adapters, searched_backends, AdapterSummary};
-pub use shader::{shader_source, Precision, REAL_F32, REAL_F64, SHADER};
+pub use shader::{shader_source, Kernel, Precision, COMMON, COOPERATIVE, PER_FRAME, REAL_F32, REAL_F64, WORKGROUP};
 
 use super::assembly::{Evaluator, FrameProblem};
 use super::backend::{check_shape, BackendError, BatchBackend, EnergyEval, FrameModel, GnSink};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-/// Frames per chunk when the adapter's limits allow it. One invocation evaluates one frame, so a
-/// large GPU needs many frames per dispatch to be busy (an H100 keeps ~270k invocations resident);
-/// device memory is about 27 KB per frame of capacity on the shipped model (input, scratch,
-/// output and two read-back buffers).
+/// Frames per chunk when the adapter's limits allow it. A large GPU needs many frames per
+/// dispatch to be busy (an H100 keeps ~2k workgroups of 64 resident); device memory is a few tens
+/// of KB per frame of capacity on the shipped model (input, scratch, output, two upload and two
+/// read-back buffers; docs/KINEMATICS.md).
 pub const DEFAULT_CAP: usize = 32_768;
 
 /// Where the backend's wall time went, summed over the calls since the last
@@ -77,6 +79,7 @@ pub struct WgpuBackend {
     np: usize,
     nm: usize,
     precision: Precision,
+    kernel: Kernel,
     /// Per-piece scratch of one input block while packing.
     pack_scratch: Vec<host::PackScratch>,
     /// Reference point of each frame of the two chunks in flight (f32-representable, in f64).
@@ -87,7 +90,11 @@ pub struct WgpuBackend {
 
 impl std::fmt::Debug for WgpuBackend {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("WgpuBackend").field("adapter", &self.adapter).field("cap", &self.cap).finish()
+        f.debug_struct("WgpuBackend")
+            .field("adapter", &self.adapter)
+            .field("cap", &self.cap)
+            .field("kernel", &self.kernel)
+            .finish()
     }
 }
 
@@ -104,8 +111,23 @@ impl WgpuBackend {
         max_cap: usize,
         precision: Precision,
     ) -> Result<WgpuBackend, BackendError> {
+        WgpuBackend::with_options(eval, max_cap, precision, Kernel::default())
+    }
+
+    /// As [`WgpuBackend::with_precision`], with the given [`Kernel`].
+    pub fn with_options(
+        eval: &Evaluator<'_>,
+        max_cap: usize,
+        precision: Precision,
+        kernel: Kernel,
+    ) -> Result<WgpuBackend, BackendError> {
         let adapter = best_adapter(precision)?;
-        WgpuBackend::on_adapter(eval, adapter, max_cap, precision)
+        WgpuBackend::on_adapter(eval, adapter, max_cap, precision, kernel)
+    }
+
+    /// How the shaders spread a frame's work.
+    pub fn kernel(&self) -> Kernel {
+        self.kernel
     }
 
     /// Where the wall time of the calls since the last reset went.
@@ -138,6 +160,7 @@ impl WgpuBackend {
         adapter: wgpu::Adapter,
         max_cap: usize,
         precision: Precision,
+        kernel: Kernel,
     ) -> Result<WgpuBackend, BackendError> {
         let summary = AdapterSummary::of(&adapter.get_info());
         let fail = |message: String| BackendError::Device { adapter: summary.name.clone(), message };
@@ -164,25 +187,23 @@ impl WgpuBackend {
         let packed = pack::pack(eval.model, eval.proxy, &eval.layout);
         let rows = packed.rows;
         // Chunk capacity: every per-frame buffer must fit one binding.
-        let word = match precision {
-            Precision::F32 => 4,
-            Precision::F64 => 8,
-        };
-        let widest = word * rows.input.max(rows.scratch).max(rows.output + 4) as u64;
+        let word = precision.word() as u64;
+        let scratch_rows = kernel.scratch_rows(&rows);
+        let widest = word * rows.input.max(scratch_rows).max(rows.output + 4) as u64;
         let bind = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         let by_limits = (bind / widest) as usize;
-        let by_groups = limits.max_compute_workgroups_per_dimension as usize * 64;
+        let by_groups = kernel.frames_per_dispatch(limits.max_compute_workgroups_per_dimension as usize);
         let cap = max_cap.min(by_limits).min(by_groups) / 64 * 64;
         if cap == 0 {
             return Err(fail(format!(
                 "one frame needs {widest} bytes per binding, more than the adapter's limit of {bind} bytes"
             )));
         }
-        let source = shader_source(&packed, cap, precision);
+        let source = shader_source(&packed, cap, precision, kernel);
 
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("batch.wgsl"),
+            label: Some(kernel.name()),
             source: wgpu::ShaderSource::Wgsl(source.into()),
         });
         let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
@@ -261,7 +282,7 @@ impl WgpuBackend {
                 mapped_at_creation: true,
             })
         });
-        let scratch = buffer("scratch", cap * rows.scratch, U::STORAGE);
+        let scratch = buffer("scratch", cap * scratch_rows, U::STORAGE);
         // Output: the compact energy rows (4 words per frame), then one block per frame.
         let output = buffer("output", cap * (rows.output + 4), U::STORAGE | U::COPY_SRC);
         let staging = [0, 1].map(|_| buffer("staging", cap * rows.output, U::MAP_READ | U::COPY_DST));
@@ -305,6 +326,7 @@ impl WgpuBackend {
             np: eval.proxy.np(),
             nm: eval.model.markers.len(),
             precision,
+            kernel,
             pack_scratch: vec![host::PackScratch::default(); 2 * rayon::current_num_threads().max(1)],
             refs: [vec![[0.0; 3]; cap], vec![[0.0; 3]; cap]],
             errors,
@@ -318,10 +340,7 @@ impl WgpuBackend {
 
     /// Bytes per shader word.
     fn word(&self) -> usize {
-        match self.precision {
-            Precision::F32 => 4,
-            Precision::F64 => 8,
-        }
+        self.precision.word()
     }
 
     /// Packs `frames` straight into the mapped upload buffer `slot` (frame-major),
@@ -378,7 +397,7 @@ impl WgpuBackend {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
             pass.set_pipeline(if linearize { &self.linearize } else { &self.energy });
             pass.set_bind_group(0, &self.bind_group, &[]);
-            pass.dispatch_workgroups(n.div_ceil(64) as u32, 1, 1);
+            pass.dispatch_workgroups(self.kernel.workgroups(n) as u32, 1, 1);
         }
         let (from, bytes) = if linearize {
             ((4 * self.cap * word) as u64, (n * r.output * word) as u64)
@@ -488,7 +507,7 @@ impl BatchBackend for WgpuBackend {
     }
 
     fn device(&self) -> String {
-        format!("wgpu: {}, {}", self.adapter, self.precision.name())
+        format!("wgpu: {}, {}, {} kernel", self.adapter, self.precision.name(), self.kernel.name())
     }
 
     fn linearize(

@@ -6,6 +6,7 @@
 //! The per-body chain walk of [`cpu::chain_contributions`](crate::kinematics::cpu) is flattened
 //! into *items*, one per (contribution, proxy-map term), in the same order as on the CPU.
 
+use super::gather;
 use crate::kinematics::Layout;
 use crate::model::proxy::ProxyMap;
 use crate::model::{Function, Model, MotionKind};
@@ -27,8 +28,13 @@ pub struct Rows {
     /// Input: proxies, observations (relative to the reference point), marker weights (0 where
     /// unobserved), tracking reference and weights, the reference point.
     pub input: usize,
-    /// Scratch: y, J_Φ, body and motion frames, one body's A/W and one marker's rows.
+    /// Scratch of the per-frame kernel (structure of arrays): y, J_Φ, body and motion frames,
+    /// one body's A/W and one marker's rows.
     pub scratch: usize,
+    /// Scratch block of the cooperative kernel (frame-major): the same first sections, then
+    /// every layout body's A/W, every marker's rows and `(w, r)`
+    /// ([`gather`](super::gather)).
+    pub scratch_coop: usize,
     /// Output: E, Σ‖r‖², markers used, g, upper H packed column by column
     /// ([`upper_index`](crate::kinematics::backend::upper_index)), model markers.
     pub output: usize,
@@ -52,6 +58,8 @@ pub struct Packed {
     /// Real values in f64; [`super::Precision`] converts them at upload.
     pub mf: Vec<f64>,
     pub rows: Rows,
+    /// Products summed into the upper triangle of `H` per frame (markers and tracking).
+    pub h_products: usize,
     /// `const` declarations except `CAP`, which [`Packed::header`] adds.
     consts: String,
 }
@@ -239,6 +247,13 @@ pub fn pack(model: &Model, proxy: &ProxyMap, layout: &Layout) -> Packed {
         lbs.push([body, deps.proxies.len(), slots.len(), items_start, items_end, markers_start, markers_end]);
         slots.extend(deps.proxies.iter().map(|&k| k as u32));
     }
+    let layout_bodies: Vec<gather::LayoutBody> = lbs
+        .iter()
+        .map(|lb| gather::LayoutBody {
+            slots: slots[lb[2]..lb[2] + lb[1]].iter().map(|&k| k as usize).collect(),
+            markers: lb[5]..lb[6],
+        })
+        .collect();
     c("U_SLOT", mu.len());
     let u_slot = mu.len();
     mu.extend(&slots);
@@ -255,6 +270,18 @@ pub fn pack(model: &Model, proxy: &ProxyMap, layout: &Layout) -> Packed {
     mu.extend(&oitems);
     c("F_ITEM", mf.len());
     mf.extend(&coefs);
+    // The cooperative kernel's tables; its scratch block shares the sections before S_AW.
+    let s_aw = ny + nt + 12 * nb + 9 * nmot;
+    let coop = gather::gather(model, proxy, &layout_bodies, s_aw);
+    for (name, section) in &coop.sections {
+        c(name, mu.len());
+        mu.extend(section);
+    }
+    c("NLEV", coop.levels);
+    c("NQE", lbm.len() / 3);
+    for (name, v) in [("C_AW", coop.c_aw), ("C_ROW", coop.c_row), ("C_WR", coop.c_wr), ("C_ROWS", coop.c_rows)] {
+        c(name, v);
+    }
     // Never bind an empty buffer.
     mu.resize(mu.len().max(4), 0);
     mf.resize(mf.len().max(4), 0.0);
@@ -268,7 +295,7 @@ pub fn pack(model: &Model, proxy: &ProxyMap, layout: &Layout) -> Packed {
     let s_mval = s_mor + 3 * nmot;
     let s_mder = s_mval + nmot;
     let s_msig = s_mder + nmot;
-    let s_aw = s_msig + nmot;
+    debug_assert_eq!(s_aw, s_msig + nmot);
     let s_row = s_aw + 6 * ns_max;
     let scratch = s_row + 3 * ns_max;
     for (name, v) in [
@@ -305,6 +332,7 @@ pub fn pack(model: &Model, proxy: &ProxyMap, layout: &Layout) -> Packed {
     let rows = Rows {
         input: i_c + 3,
         scratch: scratch.max(1),
+        scratch_coop: coop.c_rows.max(1),
         output: o_x + 3 * nm,
         o_g,
         o_h,
@@ -316,5 +344,5 @@ pub fn pack(model: &Model, proxy: &ProxyMap, layout: &Layout) -> Packed {
         i_tw,
         i_c,
     };
-    Packed { mu, mf, rows, consts }
+    Packed { mu, mf, rows, h_products: coop.h_products, consts }
 }
