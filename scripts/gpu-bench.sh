@@ -5,7 +5,9 @@
 # Measures: batched linearize / handoff / energy throughput of the shipped model at 10k, 100k and
 # 1M frames per call on cpu and wgpu (f32; f64 at 10k/100k), with wgpu's phase breakdown (pack,
 # upload, device wait, read-back mapping, unpack, host CPU time per frame), and whole-solve
-# frames/s of a 100k-frame synthetic trial on both backends on the same machine.
+# frames/s of a 100k-frame synthetic trial on both backends on the same machine. wgpu runs the
+# cooperative kernel (the default, one workgroup per frame) and, for comparison at 10k/100k, the
+# per-frame kernel. Worst case (every timeout) 4 min 50 s.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 BIN=${BIN:-target/release/smocap}
@@ -20,6 +22,8 @@ mkdir -p "$OUTDIR"
   timeout 60 "$BIN" bench-batch --backend cpu --sizes 10000,100000,1000000 --repeats 3 || echo "bench-batch cpu failed: $?"
   timeout 60 "$BIN" bench-batch --backend wgpu --cap 131072 --sizes 10000,100000,1000000 --repeats 3 \
     || echo "bench-batch wgpu failed: $?"
+  timeout 40 "$BIN" bench-batch --backend wgpu --kernel per-frame --cap 131072 --sizes 10000,100000 --repeats 3 \
+    || echo "bench-batch wgpu per-frame failed: $?"
   timeout 30 "$BIN" bench-batch --backend wgpu-f64 --cap 65536 --sizes 10000,100000 --repeats 3 \
     || echo "bench-batch wgpu-f64 failed: $?"
   for b in cpu wgpu; do

@@ -304,6 +304,35 @@ fn wgpu_f64_matches_cpu_to_1e_12_where_the_adapter_offers_shader_f64() {
     }
 }
 
+/// A call cut into several chunks (the device evaluating one while the host hands out another)
+/// gives the same bits as one chunk, for both kernels.
+#[test]
+fn cutting_a_call_into_pieces_changes_no_result() {
+    let ctx = Context::shipped().unwrap();
+    let eval = ctx.evaluator();
+    let batch = random_batch(&eval, 1000, 11, 0.01, [0.0; 3]);
+    let frames = batch.frames();
+    for kernel in KERNELS {
+        let Some(mut gpu) = gpu(&eval, 4096, kernel) else { return };
+        let mut runs = Vec::new();
+        for pieces in [1, 3] {
+            gpu.set_pieces(pieces);
+            let mut out = vec![FrameModel::new(ctx.proxy.np(), ctx.model.markers.len()); frames.len()];
+            let mut e = vec![EnergyEval::default(); frames.len()];
+            gpu.linearize(&frames, &batch.proxies, &mut out).unwrap();
+            gpu.energy(&frames, &batch.proxies, &mut e).unwrap();
+            runs.push((out, e));
+        }
+        let ((a, ea), (b, eb)) = (&runs[0], &runs[1]);
+        for f in 0..frames.len() {
+            assert_eq!(a[f].gn.h, b[f].gn.h, "{} kernel, frame {f}: H", kernel.name());
+            assert_eq!(a[f].gn.g, b[f].gn.g, "{} kernel, frame {f}: g", kernel.name());
+            assert_eq!(a[f].markers, b[f].markers, "{} kernel, frame {f}: markers", kernel.name());
+            assert_eq!(ea[f].energy.to_bits(), eb[f].energy.to_bits(), "{} kernel, frame {f}: E", kernel.name());
+        }
+    }
+}
+
 #[test]
 fn a_batch_of_the_wrong_shape_is_an_error_not_a_panic() {
     let ctx = Context::shipped().unwrap();

@@ -31,18 +31,32 @@ pub struct BenchArgs {
     /// wgpu only: how the shaders spread a frame's work over the GPU.
     #[arg(long, value_enum, default_value_t = crate::kinematics::gpu::Kernel::default())]
     pub kernel: crate::kinematics::gpu::Kernel,
+    /// wgpu only: chunks each call is cut into at least, so that the device evaluates one while
+    /// the host hands out another (chunks of at least 256 frames).
+    #[arg(long, default_value_t = crate::kinematics::gpu::DEFAULT_PIECES)]
+    pub pieces: usize,
 }
 
 pub fn run(a: BenchArgs) -> anyhow::Result<u8> {
     let ctx = Context::shipped()?;
     let eval = ctx.evaluator();
     let mut chosen = choose_with(a.backend, &eval, a.cap, a.kernel)?;
+    if let Chosen::Wgpu(b) = &mut chosen {
+        b.set_pieces(a.pieces);
+    }
     if let Some(note) = chosen.note() {
         eprintln!("note: {note}");
     }
     let mut cpu = CpuBackend::new(eval.clone());
     let device = match &chosen {
-        Chosen::Wgpu(b) => format!("{}, {} frames per dispatch", chosen.device(), b.chunk_capacity()),
+        Chosen::Wgpu(b) => {
+            format!(
+                "{}, at most {} frames per dispatch, {} pieces per call",
+                chosen.device(),
+                b.chunk_capacity(),
+                b.pieces()
+            )
+        }
         _ => chosen.device(),
     };
     let distinct = a.distinct.max(1);
@@ -57,6 +71,21 @@ pub fn run(a: BenchArgs) -> anyhow::Result<u8> {
         "# bench-batch: shipped model ({np} proxies, {nm} markers), backend {} on {device}, median of {} runs",
         chosen.name(),
         a.repeats
+    );
+    let cost = crate::kinematics::gpu::pack::pack(&ctx.model, &ctx.proxy, &eval.layout).cost;
+    println!(
+        "# cost per frame-evaluation (docs/KINEMATICS.md): in {} words, out {} words, cooperative scratch {} words; \
+         {} bodies in {} levels, {} chain items, {} Jacobian row words, {} H and {} g products; ≈ {:.0} kflop",
+        cost.in_words,
+        cost.out_words,
+        cost.scratch_words,
+        cost.bodies,
+        cost.levels,
+        cost.chain_items,
+        cost.row_words,
+        cost.h_products,
+        cost.g_products,
+        cost.flops() as f64 / 1e3
     );
     println!(
         "# backend\tbatch\tlinearize_ms\tlinearize_frames_per_s\thandoff_ms\thandoff_frames_per_s\tenergy_ms\tenergy_frames_per_s"

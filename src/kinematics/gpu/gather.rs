@@ -40,8 +40,9 @@ pub(super) struct Gather {
     pub c_row: usize,
     pub c_wr: usize,
     pub c_rows: usize,
-    /// Products summed into `H` (marker and tracking), for the cost model.
+    /// Products summed into `H` and `g` (marker and tracking), for the cost model.
     pub h_products: usize,
+    pub g_products: usize,
 }
 
 /// Offsets into `items` of consecutive ranges given by their lengths: `[0, n0, n0 + n1, …]`.
@@ -131,6 +132,7 @@ pub(super) fn gather(model: &Model, proxy: &ProxyMap, lbs: &[LayoutBody], scratc
         }
     }
     let h_products = h_m.iter().map(|l| l.len() / 3).sum::<usize>() + h_t.iter().map(|l| l.len() / 2).sum::<usize>();
+    let g_products = g_m.iter().map(|l| l.len() / 2).sum::<usize>() + g_t.iter().map(Vec::len).sum::<usize>();
     let (g_m_off, g_m_flat) = offsets(&g_m, 2);
     let (g_t_off, g_t_flat) = offsets(&g_t, 1);
     let (h_m_off, h_m_flat) = offsets(&h_m, 3);
@@ -149,5 +151,5 @@ pub(super) fn gather(model: &Model, proxy: &ProxyMap, lbs: &[LayoutBody], scratc
         ("U_HTO", h_t_off),
         ("U_HT", h_t_flat),
     ];
-    Gather { sections, levels, c_aw, c_row, c_wr, c_rows, h_products }
+    Gather { sections, levels, c_aw, c_row, c_wr, c_rows, h_products, g_products }
 }

@@ -30,6 +30,14 @@ use std::time::Instant;
 /// read-back buffers; docs/KINEMATICS.md).
 pub const DEFAULT_CAP: usize = 32_768;
 
+/// Chunks a call is cut into by default ([`WgpuBackend::set_pieces`]): two, so that the device
+/// evaluates one while the CPU hands out (and the lanes solve the QPs of) the other.
+pub const DEFAULT_PIECES: usize = 2;
+
+/// Smallest chunk a call is cut into for overlap (frames): below it a dispatch costs more in
+/// fixed overhead than the overlap saves.
+pub const MIN_PIECE: usize = 256;
+
 /// Where the backend's wall time went, summed over the calls since the last
 /// [`WgpuBackend::reset_phase_times`] (seconds). Chunks overlap (the device runs one chunk while
 /// the host packs the next), so `wait_s` is the time the host had nothing else to do.
@@ -80,6 +88,8 @@ pub struct WgpuBackend {
     nm: usize,
     precision: Precision,
     kernel: Kernel,
+    /// Chunks a call is cut into (at least), for overlap of device and host.
+    pieces: usize,
     /// Per-piece scratch of one input block while packing.
     pack_scratch: Vec<host::PackScratch>,
     /// Reference point of each frame of the two chunks in flight (f32-representable, in f64).
@@ -123,6 +133,18 @@ impl WgpuBackend {
     ) -> Result<WgpuBackend, BackendError> {
         let adapter = best_adapter(precision)?;
         WgpuBackend::on_adapter(eval, adapter, max_cap, precision, kernel)
+    }
+
+    /// Chunks a call is cut into (at least; chunks of at least [`MIN_PIECE`] frames), so that
+    /// the device works on one while the host hands out another: 1 runs a call that fits one
+    /// dispatch as one chunk. Results do not depend on it.
+    pub fn set_pieces(&mut self, pieces: usize) {
+        self.pieces = pieces.max(1);
+    }
+
+    /// See [`WgpuBackend::set_pieces`].
+    pub fn pieces(&self) -> usize {
+        self.pieces
     }
 
     /// How the shaders spread a frame's work.
@@ -327,6 +349,7 @@ impl WgpuBackend {
             nm: eval.model.markers.len(),
             precision,
             kernel,
+            pieces: DEFAULT_PIECES,
             pack_scratch: vec![host::PackScratch::default(); 2 * rayon::current_num_threads().max(1)],
             refs: [vec![[0.0; 3]; cap], vec![[0.0; 3]; cap]],
             errors,
@@ -458,7 +481,10 @@ impl WgpuBackend {
 
     /// Runs `frames` chunk by chunk, two chunks in flight: while the device works on chunk
     /// `i`, the host packs chunk `i + 1` and hands out the results of chunk `i − 1` with
-    /// `unpack(range, mapped bytes, reference points)`.
+    /// `unpack(range, mapped bytes, reference points)` — for `linearize_into`, the solver's QPs
+    /// of chunk `i − 1` run on the CPU pool while the device evaluates chunk `i`. A call is cut
+    /// into at least [`WgpuBackend::pieces`] chunks (of at least [`MIN_PIECE`] frames) so that
+    /// even a call that fits one dispatch keeps both sides busy.
     fn run(
         &mut self,
         frames: &[FrameProblem<'_>],
@@ -466,7 +492,8 @@ impl WgpuBackend {
         linearize: bool,
         mut unpack: impl FnMut(std::ops::Range<usize>, &[u8], &[[f64; 3]]) -> f64,
     ) -> Result<(), BackendError> {
-        let (n, cap, np) = (frames.len(), self.cap, self.np);
+        let (n, np) = (frames.len(), self.np);
+        let cap = piece_len(n, self.cap, self.pieces);
         let mut in_flight: Option<(Pending, std::ops::Range<usize>)> = None;
         for c in 0..n.div_ceil(cap) {
             let (a, b) = (c * cap, ((c + 1) * cap).min(n));
@@ -481,6 +508,12 @@ impl WgpuBackend {
         self.phases.frames += n as u64;
         Ok(())
     }
+}
+
+/// Frames per chunk for a call of `n` frames: at most `cap`, and at most `n / pieces` (so that
+/// the call takes `pieces` chunks) unless that is under [`MIN_PIECE`].
+fn piece_len(n: usize, cap: usize, pieces: usize) -> usize {
+    n.div_ceil(pieces.max(1)).max(MIN_PIECE).min(cap).max(1)
 }
 
 /// Structure-of-arrays stride of a chunk of `n` frames: `n` rounded up to a workgroup.

@@ -51,6 +51,43 @@ pub struct Rows {
     pub i_c: usize,
 }
 
+/// The work of one frame-evaluation of a packed model, for the cost model in
+/// docs/KINEMATICS.md (`smocap bench-batch` prints it).
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub struct Cost {
+    /// Words per frame: input, output (linearize) and the cooperative kernel's scratch block.
+    pub in_words: usize,
+    pub out_words: usize,
+    pub scratch_words: usize,
+    /// Bodies, tree levels, motions, markers, layout bodies, chain items.
+    pub bodies: usize,
+    pub levels: usize,
+    pub motions: usize,
+    pub markers: usize,
+    pub layout_bodies: usize,
+    pub chain_items: usize,
+    /// Jacobian row words formed (3 per marker and slot).
+    pub row_words: usize,
+    /// 3-vector dot products summed into `H` (upper triangle) and `g`.
+    pub h_products: usize,
+    pub g_products: usize,
+}
+
+impl Cost {
+    /// Floating-point operations per frame (multiply and add counted apart): bodies ≈ 200 each
+    /// (two 3×3 products and the motions' axis-angle), chain items ≈ 30, row words ≈ 8 (a cross
+    /// product and the offset items), products 6 (a 3-vector dot and the weight) — an estimate to
+    /// hold measurements against, not a count of instructions.
+    pub fn flops(&self) -> usize {
+        200 * self.bodies
+            + 60 * self.motions
+            + 30 * self.chain_items
+            + 8 * self.row_words
+            + 6 * (self.h_products + self.g_products)
+            + 20 * self.markers
+    }
+}
+
 /// A model packed for the shaders.
 #[derive(Clone, Debug)]
 pub struct Packed {
@@ -58,8 +95,8 @@ pub struct Packed {
     /// Real values in f64; [`super::Precision`] converts them at upload.
     pub mf: Vec<f64>,
     pub rows: Rows,
-    /// Products summed into the upper triangle of `H` per frame (markers and tracking).
-    pub h_products: usize,
+    /// What one frame-evaluation costs (docs/KINEMATICS.md, the cost model).
+    pub cost: Cost,
     /// `const` declarations except `CAP`, which [`Packed::header`] adds.
     consts: String,
 }
@@ -344,5 +381,19 @@ pub fn pack(model: &Model, proxy: &ProxyMap, layout: &Layout) -> Packed {
         i_tw,
         i_c,
     };
-    Packed { mu, mf, rows, h_products: coop.h_products, consts }
+    let cost = Cost {
+        in_words: rows.input,
+        out_words: rows.output,
+        scratch_words: rows.scratch_coop,
+        bodies: nb,
+        levels: coop.levels,
+        motions: nmot,
+        markers: nm,
+        layout_bodies: layout.bodies.len(),
+        chain_items: items.len() / 5,
+        row_words: coop.c_wr - coop.c_row,
+        h_products: coop.h_products,
+        g_products: coop.g_products,
+    };
+    Packed { mu, mf, rows, cost, consts }
 }
