@@ -1,7 +1,7 @@
 //! The model as the shaders read it: two flat arrays (`u32` indices, real values: kept in f64 here,
 //! uploaded as the shader's `real`, f32 or f64) with section
 //! offsets, and the WGSL header of `const`s that names those offsets and the per-frame row
-//! layouts of the input, scratch and output buffers (see `shaders/batch.wgsl`).
+//! layouts of the input, scratch and output buffers (see `shaders/common.wgsl` and the kernels).
 //!
 //! The per-body chain walk of [`cpu::chain_contributions`](crate::kinematics::cpu) is flattened
 //! into *items*, one per (contribution, proxy-map term), in the same order as on the CPU.
