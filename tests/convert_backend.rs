@@ -152,3 +152,31 @@ fn convert_backend_wgpu_solves_trials_together_on_whatever_adapter_exists() {
     assert_eq!(run["backend"], "wgpu");
     assert_ne!(run["adapter"], "cpu", "the adapter is named");
 }
+
+#[test]
+fn a_trial_failing_mid_stream_among_trials_solved_together_fails_alone() {
+    // walk01 (2000 frames) outgrows the file-size limit mid-way; walk02 (its first 30 frames)
+    // fits, and is solved in the same batch (64 lanes hold both trials' segments).
+    let (dir, toml) = archive("midway", 1, 1, 2000);
+    let subj = dir.join("data/subj01");
+    let t = smocap::io::read_markers(&subj.join("walk01.trc")).unwrap();
+    smocap::io::trc::write_trc(&subj.join("walk02.trc"), &t.select_frames(0..30), "mm").unwrap();
+    let out = dir.join("out");
+    let rep = dir.join("report.json");
+    // SIGXFSZ ignored (kept across exec), so writes past the limit fail with EFBIG.
+    let o = Command::new("sh")
+        .args(["-c", "trap '' XFSZ; ulimit -f 256; exec \"$0\" \"$@\"", env!("CARGO_BIN_EXE_smocap"), "convert"])
+        .args([toml.to_str().unwrap(), "--out", out.to_str().unwrap(), "--report-json", rep.to_str().unwrap()])
+        .args(["--lanes", "64", "-q"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(3), "one trial failed, one converted: {}", stderr(&o));
+    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    let (t1, t2) = (&r["trials"][0], &r["trials"][1]);
+    assert_eq!((&t1["trial"], &t1["status"]), (&"subj01/walk01.trc".into(), &"failed".into()), "{r}");
+    assert!(t1["error"].as_str().unwrap().contains("too large"), "{r}");
+    assert_eq!((&t2["status"], &t2["frames"], &t2["backend"]), (&"ok".into(), &30.into(), &"cpu".into()), "{r}");
+    let files: Vec<PathBuf> = mcaps(&out).into_iter().map(|f| f.0).collect();
+    assert_eq!(files, [PathBuf::from("lab/subj01/walk02.mcap")]);
+    assert!(!stderr(&o).contains("panicked"));
+}

@@ -509,7 +509,7 @@ pub fn batches(frames: &[u64], lanes: usize, window: usize) -> Vec<(usize, usize
     let (mut i0, mut segs, mut held) = (0, 0, 0);
     for (i, &n) in frames.iter().enumerate() {
         let n = usize::try_from(n).unwrap_or(usize::MAX);
-        let (s, h) = (crate::pipeline::stream::segments(n.max(1)).len(), n.min(window));
+        let (s, h) = (crate::pipeline::stream::segment_count(n), n.min(window));
         if i > i0 && (segs >= lanes || held + h > BATCH_HELD_FRAMES || i - i0 >= BATCH_TRIALS) {
             out.push((i0, i));
             (i0, segs, held) = (i, 0, 0);
@@ -657,4 +657,22 @@ fn run_info(
     }
     run.insert("epoch_ns".into(), opt.writer.epoch_ns.to_string());
     run
+}
+
+#[cfg(test)]
+mod tests {
+    use super::batches;
+
+    #[test]
+    fn batches_fill_the_lanes_bound_what_they_hold_and_cover_every_trial_once() {
+        assert_eq!(batches(&[], 4, 4096), []);
+        assert_eq!(batches(&[100, 100, 100], 1, 4096), [(0, 1), (1, 2), (2, 3)]);
+        // 1, 2 and 5 segments: a batch ends once its segments fill the lanes.
+        assert_eq!(batches(&[100, 450, 1000, 100], 3, 4096), [(0, 2), (2, 3), (3, 4)]);
+        assert_eq!(batches(&[100; 200], 4096, 4096), [(0, 64), (64, 128), (128, 192), (192, 200)]);
+        // Held frames: a window each at most.
+        assert_eq!(batches(&[4096; 20], 1 << 20, 4096), [(0, 16), (16, 20)]);
+        assert_eq!(batches(&[100_000; 20], 1 << 20, 8192), [(0, 8), (8, 16), (16, 20)]);
+        assert_eq!(batches(&[1 << 40, 10], 1 << 20, 1 << 20), [(0, 1), (1, 2)]);
+    }
 }

@@ -199,10 +199,15 @@ pub const SEGMENT_FRAMES: usize = 200;
 /// would in an uncut trial.
 pub const SEGMENT_RUN_IN: usize = 20;
 
+/// How many [`segments`] a trial of `n` frames has: `max(1, n / SEGMENT_FRAMES)`.
+pub fn segment_count(n: usize) -> usize {
+    (n / SEGMENT_FRAMES).max(1)
+}
+
 /// The segments of a trial of `n` frames: `[a, b)` ranges covering `0..n`, a function of `n`
 /// alone (see [`SEGMENT_FRAMES`]).
 pub fn segments(n: usize) -> Vec<(usize, usize)> {
-    let k = (n / SEGMENT_FRAMES).max(1);
+    let k = segment_count(n);
     (0..k).map(|i| (i * n / k, (i + 1) * n / k)).collect()
 }
 
