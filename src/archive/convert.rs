@@ -10,7 +10,9 @@
 //! QPs run on a pool of `jobs` threads. The backend is owned by the subject's task and used by one
 //! batch at a time, so it is never shared between threads: no lock, and no worker of the pool
 //! waits on a lock that a task it took up while waiting holds (rayon workers take up other tasks
-//! while they wait). Several subjects converted at once each hold their own backend. With
+//! while they wait). Several subjects converted at once each hold their own backend (and each
+//! batch its own pool: with several subjects batched at once, more threads than `jobs` share
+//! the cores). With
 //! `lanes` set, the CPU backend solves a subject's trials in batches the same way. The files do
 //! not depend on the grouping, the lane count or `jobs`: each segment is solved as when its trial
 //! is solved alone.

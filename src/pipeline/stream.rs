@@ -4,7 +4,9 @@
 //! Frames leave in frame order. Frames with too few markers wait until the next solved frame
 //! (they are bridged between their solved neighbours, see [`super::trial`]); with several lanes,
 //! frames of later segments wait for the earlier segments. With one lane (what `smocap convert`
-//! uses), what is held beyond the input trial is the current gap of unsolved frames.
+//! uses on the CPU backend), what is held beyond the input trial is the current gap of unsolved
+//! frames. Several trials of one subject can be solved together ([`solve_trials_streaming`]),
+//! their segments sharing the lanes, each trial's frames still leaving in its own frame order.
 
 use super::frames::{for_each_window, TrialFrames};
 use super::lanes::{resolve_outliers_above, run_lanes_across, FrameObservations, FrameResult, TrialInputs};
@@ -57,7 +59,8 @@ pub struct StreamedTrial {
     pub gaps: GapStats,
     /// Frames whose result came from the `auto` pre-solve pass (outliers solved again).
     pub presolved: Vec<usize>,
-    /// Wall time of all frames (s), calibration excluded, sink included.
+    /// Wall time of all frames (s), calibration excluded, sink included (of trials solved
+    /// together, [`solve_trials_streaming`]: of them all).
     pub wall_seconds: f64,
     pub threads: usize,
 }
@@ -312,6 +315,9 @@ pub fn solve_trials_streaming(
             Err(e) => results[index] = Some(Err(e)),
         }
     }
+    if jobs.is_empty() {
+        return results.into_iter().map(|r| r.expect("one result per trial")).collect();
+    }
     let eval = ctx.evaluator();
     let ny = ctx.model.ny();
 
@@ -354,6 +360,7 @@ pub fn solve_trials_streaming(
     // one during which a caller's rayon worker would take up other work (e.g. another trial).
     let pool =
         (threads > 1 || lanes > 1).then(|| rayon::ThreadPoolBuilder::new().num_threads(threads).build().ok()).flatten();
+    let parallel = pool.is_some();
     let mut backend = backend;
     let mut run = || {
         let mut cpu = None;
@@ -416,11 +423,19 @@ pub fn solve_trials_streaming(
             }
         }
         if auto {
-            jobs.par_iter_mut().zip(matches.par_iter()).filter(|(job, _)| job.failed.is_none()).for_each(|(job, m)| {
-                if let Err(e) = presolve_pass(job, m, &eval, settings, base) {
-                    job.failed = Some(e.into_error(job.name));
+            let pass = |(job, m): (&mut Job<'_, '_, '_>, &MarkerMatch)| {
+                if job.failed.is_none() {
+                    if let Err(e) = presolve_pass(job, m, &eval, settings, base) {
+                        job.failed = Some(e.into_error(job.name));
+                    }
                 }
-            });
+            };
+            // In parallel on the run's pool; without one, on the caller's thread.
+            if parallel {
+                jobs.par_iter_mut().zip(matches.par_iter()).for_each(pass);
+            } else {
+                jobs.iter_mut().zip(&matches).for_each(pass);
+            }
         }
     };
     match &pool {
