@@ -60,11 +60,15 @@ pub struct ConvertOptions {
     pub lanes: Option<usize>,
 }
 
-/// Trials solved together at most (each holds a writer thread and a window of its frames).
-pub const BATCH_TRIALS: usize = 64;
+/// Trials solved together at most: each holds a writer thread (its 1 MiB chunk and zstd
+/// context) and a window of its frames.
+pub const BATCH_TRIALS: usize = 128;
 /// Frames held together at most by the trials solved together (each holds at most a window of
-/// [`ConvertOptions::window_frames`]); a trial holding more is solved in a batch of its own.
-pub const BATCH_HELD_FRAMES: usize = 65_536;
+/// [`ConvertOptions::window_frames`]; 131 072 frames of 53 markers are 167 MB of positions), so
+/// at most ≈ 650 segments of short trials per batch; a trial holding more is solved in a batch of
+/// its own. With the lanes, these bound what a batch holds: more fills a device batch better,
+/// at the cost of memory.
+pub const BATCH_HELD_FRAMES: usize = 131_072;
 
 /// One trial's fate.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -671,10 +675,10 @@ mod tests {
         assert_eq!(batches(&[100, 100, 100], 1, 4096), [(0, 1), (1, 2), (2, 3)]);
         // 1, 2 and 5 segments: a batch ends once its segments fill the lanes.
         assert_eq!(batches(&[100, 450, 1000, 100], 3, 4096), [(0, 2), (2, 3), (3, 4)]);
-        assert_eq!(batches(&[100; 200], 4096, 4096), [(0, 64), (64, 128), (128, 192), (192, 200)]);
+        assert_eq!(batches(&[100; 300], 4096, 4096), [(0, 128), (128, 256), (256, 300)]);
         // Held frames: a window each at most.
-        assert_eq!(batches(&[4096; 20], 1 << 20, 4096), [(0, 16), (16, 20)]);
-        assert_eq!(batches(&[100_000; 20], 1 << 20, 8192), [(0, 8), (8, 16), (16, 20)]);
+        assert_eq!(batches(&[4096; 40], 1 << 20, 4096), [(0, 32), (32, 40)]);
+        assert_eq!(batches(&[100_000; 40], 1 << 20, 8192), [(0, 16), (16, 32), (32, 40)]);
         assert_eq!(batches(&[1 << 40, 10], 1 << 20, 1 << 20), [(0, 1), (1, 2)]);
     }
 }
