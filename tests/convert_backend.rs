@@ -145,12 +145,18 @@ fn convert_backend_wgpu_solves_trials_together_on_whatever_adapter_exists() {
     let (o, few) = convert(&dir, &toml, "wgpu-lanes1", &["--backend", "wgpu", "--lanes", "1"], None);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(few.len(), 2);
-    let (o, many) = convert(&dir, &toml, "wgpu", &["--backend", "wgpu"], None);
+    let report = dir.join("wgpu.json");
+    let (o, many) =
+        convert(&dir, &toml, "wgpu", &["--backend", "wgpu", "--report-json", report.to_str().unwrap()], None);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(differ(&few, &many).is_empty(), "the lane count changed {:?}", differ(&few, &many));
     let run = recorded_run(&dir.join("out-wgpu/lab/subj01/walk01.mcap")).expect("run metadata");
     assert_eq!(run["backend"], "wgpu");
     assert_ne!(run["adapter"], "cpu", "the adapter is named");
+    let rep: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("wgpu.json")).unwrap()).unwrap();
+    let summary = rep["trials"][0]["backend"].as_str().unwrap();
+    assert_eq!(summary, format!("wgpu: {}", run["adapter"]), "the summary names the backend too");
 }
 
 #[test]

@@ -12,10 +12,9 @@
 //! waits on a lock that a task it took up while waiting holds (rayon workers take up other tasks
 //! while they wait). Several subjects converted at once each hold their own backend (and each
 //! batch its own pool: with several subjects batched at once, more threads than `jobs` share
-//! the cores). With
-//! `lanes` set, the CPU backend solves a subject's trials in batches the same way. The files do
-//! not depend on the grouping, the lane count or `jobs`: each segment is solved as when its trial
-//! is solved alone.
+//! the cores). With `lanes` set, the CPU backend solves a subject's trials in batches the same
+//! way. The files do not depend on the grouping, the lane count or `jobs`: each segment is
+//! solved as when its trial is solved alone.
 
 use super::config::Dataset;
 use super::discover::{discover, SubjectGroup, TrialEntry};
@@ -91,7 +90,7 @@ pub struct TrialOutcome {
     pub iterations: Option<P50P90>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rmse_mm: Option<P50P90>,
-    /// The evaluation backend and device that solved it (`cpu`; `wgpu: <adapter>`).
+    /// The evaluation backend that solved it: `cpu`, or `wgpu: <adapter description>`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub backend: Option<String>,
 }
@@ -547,6 +546,7 @@ fn batched(
         Some((b, device)) => (b.name(), *device),
         None => ("cpu", "cpu"),
     };
+    let summary = if name == "cpu" { "cpu".to_string() } else { format!("{name}: {device}") };
     let frames: Vec<u64> = todo.iter().map(|(t, ..)| t.frames).collect();
     let mut outcomes = Vec::with_capacity(todo.len());
     for (i0, i1) in batches(&frames, lanes, opt.window_frames) {
@@ -572,7 +572,7 @@ fn batched(
         let progress = opt.progress.as_deref().map(|p| &p.frames_done);
         let results = solve_and_write_all(&jobs, cal, &opt.writer, progress, solver);
         for ((t, out, ..), r) in opened.iter().zip(results) {
-            let o = trial_outcome(d, g, t, out, r, device);
+            let o = trial_outcome(d, g, t, out, r, &summary);
             report(&o);
             outcomes.push(o);
         }
@@ -587,7 +587,7 @@ fn trial_outcome(
     t: &TrialEntry,
     out: &Path,
     r: Result<super::trial_job::Solved, String>,
-    device: &str,
+    backend: &str,
 ) -> TrialOutcome {
     match r {
         Ok(s) => TrialOutcome {
@@ -596,7 +596,7 @@ fn trial_outcome(
             ms_per_frame: Some(s.ms_per_frame),
             iterations: Some(s.iterations),
             rmse_mm: s.rmse_mm,
-            backend: Some(device.into()),
+            backend: Some(backend.into()),
             ..outcome(d, g, t, out, if s.suspect.is_some() { "suspect" } else { "ok" }, s.suspect.clone())
         },
         Err(e) => failed(d, g, t, out, e),
