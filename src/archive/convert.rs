@@ -1,14 +1,30 @@
 //! `smocap convert`: every trial of every dataset to one MCAP file, each subject calibrated once.
 //! Subjects run in parallel (`jobs` workers), a subject's trials too; a trial that fails is
 //! recorded with its reason and the others go on.
+//!
+//! Backends: on the CPU (the default) each trial is solved by one lane on one worker, trials in
+//! parallel. With a device backend (`wgpu`, or `auto` on a real GPU) each subject builds its own
+//! backend (it holds the subject's model on the device) once calibrated, and its trials go
+//! through it in batches ([`solve_and_write_all`]): the segments of a batch's trials share the
+//! lanes of one scheduler, so that short trials fill a device batch together, and the batch's
+//! QPs run on a pool of `jobs` threads. The backend is owned by the subject's task and used by one
+//! batch at a time, so it is never shared between threads: no lock, and no worker of the pool
+//! waits on a lock that a task it took up while waiting holds (rayon workers take up other tasks
+//! while they wait). Several subjects converted at once each hold their own backend (and each
+//! batch its own pool: with several subjects batched at once, more threads than `jobs` share
+//! the cores). With `lanes` set, the CPU backend solves a subject's trials in batches the same
+//! way. The files do not depend on the grouping, the lane count or `jobs`: each segment is
+//! solved as when its trial is solved alone.
 
 use super::config::Dataset;
 use super::discover::{discover, SubjectGroup, TrialEntry};
 use super::inspect::recorded_run;
 use super::mcap_out::{partial_path, RunInfo, WriterOptions};
 use super::shard::{assign, Shard};
-use super::trial_job::{open_for, solve_and_write, Calibrated};
+use super::trial_job::{open_for, solve_and_write, solve_and_write_all, Calibrated, Solver, TrialJob};
+use crate::kinematics::backend::BatchBackend;
 use crate::pipeline::convention::InputOptions;
+use crate::pipeline::device::{BackendChoice, Chosen};
 use crate::pipeline::frames::TrialFrames;
 use crate::pipeline::stats::P50P90;
 use crate::pipeline::subject::prepare_subject;
@@ -34,7 +50,24 @@ pub struct ConvertOptions {
     /// [`super::trial_job::WINDOW_FRAMES`]); shorter ones are held whole. Results do not depend
     /// on it.
     pub window_frames: usize,
+    /// Evaluation backend. `auto` is taken per subject as [`crate::pipeline::device::choose`]
+    /// does; settle it before ([`crate::pipeline::device::settle`]) to decide once.
+    pub backend: BackendChoice,
+    /// Lanes of the scheduler with a subject's trials solved in batches: default 4096 on a device
+    /// backend; on the CPU backend, setting it solves trials in batches too (else one lane per
+    /// trial, trials in parallel).
+    pub lanes: Option<usize>,
 }
+
+/// Trials solved together at most: each holds a writer thread (its 1 MiB chunk and zstd
+/// context) and a window of its frames.
+pub const BATCH_TRIALS: usize = 128;
+/// Frames held together at most by the trials solved together (each holds at most a window of
+/// [`ConvertOptions::window_frames`]; 131 072 frames of 53 markers are 167 MB of positions), so
+/// at most ≈ 650 segments of short trials per batch; a trial holding more is solved in a batch of
+/// its own. With the lanes, these bound what a batch holds: more fills a device batch better,
+/// at the cost of memory.
+pub const BATCH_HELD_FRAMES: usize = 131_072;
 
 /// One trial's fate.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -57,6 +90,9 @@ pub struct TrialOutcome {
     pub iterations: Option<P50P90>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rmse_mm: Option<P50P90>,
+    /// The evaluation backend that solved it: `cpu`, or `wgpu: <adapter description>`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub backend: Option<String>,
 }
 
 /// A dataset's fate (skipped ones say why: its root is absent; failed ones too: a bad glob, a
@@ -276,7 +312,7 @@ pub fn convert(
         log(&format!("[{k}/{total}] {}/{}: {what}", t.dataset, t.trial));
     };
     let run = || -> Vec<TrialOutcome> {
-        groups.par_iter().flat_map_iter(|g| subject(&datasets[g.dataset], g, opt, &conflicts, &report)).collect()
+        groups.par_iter().flat_map_iter(|g| subject(&datasets[g.dataset], g, opt, &conflicts, &report, log)).collect()
     };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(opt.jobs.max(1)).build();
     let mut trials = match &pool {
@@ -312,6 +348,7 @@ fn outcome(
         ms_per_frame: None,
         iterations: None,
         rmse_mm: None,
+        backend: None,
     }
 }
 
@@ -331,6 +368,7 @@ fn subject(
     opt: &ConvertOptions,
     conflicts: &BTreeMap<(usize, String), String>,
     report: &(dyn Fn(&TrialOutcome) + Sync),
+    log: &(dyn Fn(&str) + Sync),
 ) -> Vec<TrialOutcome> {
     let mut outcomes = Vec::new();
     let mut todo = Vec::new();
@@ -437,18 +475,135 @@ fn subject(
         }
         Err(why) => return [outcomes, fail_all(why)].concat(),
     };
-    let solved: Vec<TrialOutcome> = todo
-        .par_iter()
-        .map(|(t, out, hash)| {
-            let o = solve_one(d, g, t, out, hash, &input, &cal, opt);
-            report(&o);
-            o
-        })
-        .collect();
+    // The backend holds the model (on the device for wgpu): chosen once the markers are final.
+    let pinned = cal.ctx().pinned_to(&cal.calibration);
+    let chosen =
+        match crate::pipeline::device::choose(opt.backend, &pinned.evaluator(), crate::kinematics::gpu::DEFAULT_CAP) {
+            Ok(c) => c,
+            Err(e) => return [outcomes, fail_all(format!("evaluation backend: {e}"))].concat(),
+        };
+    drop(pinned);
+    if let Some(note) = chosen.note() {
+        log(&format!("note: {}/{}: {note}", d.name, g.subject));
+    }
+    let solved = match (chosen, opt.lanes) {
+        (Chosen::Cpu { .. }, None) => todo
+            .par_iter()
+            .map(|(t, out, hash)| {
+                let o = solve_one(d, g, t, out, hash, &input, &cal, opt);
+                report(&o);
+                o
+            })
+            .collect(),
+        (Chosen::Cpu { .. }, Some(lanes)) => batched(d, g, &todo, &input, &cal, opt, None, lanes, report),
+        (Chosen::Wgpu(mut b), lanes) => {
+            let device = b.device();
+            let lanes = lanes.unwrap_or(4096);
+            let backend = Some((b.as_mut() as &mut dyn BatchBackend, device.as_str()));
+            batched(d, g, &todo, &input, &cal, opt, backend, lanes, report)
+        }
+    };
     [outcomes, solved].concat()
 }
 
-/// Reads one trial, solves it and streams it to its MCAP file.
+/// Consecutive runs `[i0, i1)` of trials of `frames` frames solved together: until their
+/// segments fill `lanes`, they would hold more than [`BATCH_HELD_FRAMES`], or there are
+/// [`BATCH_TRIALS`] of them.
+pub fn batches(frames: &[u64], lanes: usize, window: usize) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    let (mut i0, mut segs, mut held) = (0, 0, 0);
+    for (i, &n) in frames.iter().enumerate() {
+        let n = usize::try_from(n).unwrap_or(usize::MAX);
+        let (s, h) = (crate::pipeline::stream::segment_count(n), n.min(window));
+        if i > i0 && (segs >= lanes || held + h > BATCH_HELD_FRAMES || i - i0 >= BATCH_TRIALS) {
+            out.push((i0, i));
+            (i0, segs, held) = (i, 0, 0);
+        }
+        segs += s;
+        held += h;
+    }
+    if i0 < frames.len() {
+        out.push((i0, frames.len()));
+    }
+    out
+}
+
+/// Solves a subject's trials in batches ([`batches`]) through one backend (`(backend, device)`;
+/// the CPU backend when `None`), each batch's segments sharing `lanes` lanes.
+#[allow(clippy::too_many_arguments)]
+fn batched(
+    d: &Dataset,
+    g: &SubjectGroup,
+    todo: &[(&TrialEntry, PathBuf, String)],
+    input: &InputOptions,
+    cal: &Calibrated,
+    opt: &ConvertOptions,
+    mut backend: Option<(&mut dyn BatchBackend, &str)>,
+    lanes: usize,
+    report: &(dyn Fn(&TrialOutcome) + Sync),
+) -> Vec<TrialOutcome> {
+    let (name, device) = match &backend {
+        Some((b, device)) => (b.name(), *device),
+        None => ("cpu", "cpu"),
+    };
+    let summary = if name == "cpu" { "cpu".to_string() } else { format!("{name}: {device}") };
+    let frames: Vec<u64> = todo.iter().map(|(t, ..)| t.frames).collect();
+    let mut outcomes = Vec::with_capacity(todo.len());
+    for (i0, i1) in batches(&frames, lanes, opt.window_frames) {
+        let mut opened = Vec::new();
+        for (t, out, hash) in &todo[i0..i1] {
+            match open_for(d, &cal.base, &t.path, input, opt.window_frames) {
+                Ok(trial) => {
+                    let run = run_info(d, g, t, hash, cal, trial.as_ref(), opt, (name, device));
+                    opened.push((*t, out, trial, run));
+                }
+                Err(e) => {
+                    let o = failed(d, g, t, out, e);
+                    report(&o);
+                    outcomes.push(o);
+                }
+            }
+        }
+        let jobs: Vec<TrialJob<'_>> = opened
+            .iter()
+            .map(|(t, out, trial, run)| TrialJob { out: out.as_path(), name: &t.rel, trial: trial.as_ref(), run })
+            .collect();
+        let solver = Solver { threads: opt.jobs, lanes, backend: backend.as_mut().map(|(b, _)| &mut **b as _) };
+        let progress = opt.progress.as_deref().map(|p| &p.frames_done);
+        let results = solve_and_write_all(&jobs, cal, &opt.writer, progress, solver);
+        for ((t, out, ..), r) in opened.iter().zip(results) {
+            let o = trial_outcome(d, g, t, out, r, &summary);
+            report(&o);
+            outcomes.push(o);
+        }
+    }
+    outcomes
+}
+
+/// A converted trial's outcome.
+fn trial_outcome(
+    d: &Dataset,
+    g: &SubjectGroup,
+    t: &TrialEntry,
+    out: &Path,
+    r: Result<super::trial_job::Solved, String>,
+    backend: &str,
+) -> TrialOutcome {
+    match r {
+        Ok(s) => TrialOutcome {
+            frames: s.frames,
+            solve_s: s.solve_s,
+            ms_per_frame: Some(s.ms_per_frame),
+            iterations: Some(s.iterations),
+            rmse_mm: s.rmse_mm,
+            backend: Some(backend.into()),
+            ..outcome(d, g, t, out, if s.suspect.is_some() { "suspect" } else { "ok" }, s.suspect.clone())
+        },
+        Err(e) => failed(d, g, t, out, e),
+    }
+}
+
+/// Reads one trial, solves it (one lane, the CPU backend) and streams it to its MCAP file.
 #[allow(clippy::too_many_arguments)]
 fn solve_one(
     d: &Dataset,
@@ -461,11 +616,27 @@ fn solve_one(
     opt: &ConvertOptions,
 ) -> TrialOutcome {
     let (writer, progress) = (&opt.writer, opt.progress.as_deref());
-    let fail = |e: String| failed(d, g, t, out, e);
     let trial = match open_for(d, &cal.base, &t.path, input, opt.window_frames) {
         Ok(m) => m,
-        Err(e) => return fail(e),
+        Err(e) => return failed(d, g, t, out, e),
     };
+    let run = run_info(d, g, t, hash, cal, trial.as_ref(), opt, ("cpu", "cpu"));
+    let r = solve_and_write(out, &t.rel, trial.as_ref(), cal, &run, writer, progress.map(|p| &p.frames_done));
+    trial_outcome(d, g, t, out, r, "cpu")
+}
+
+/// The `smocap.run` metadata of a trial solved on `backend` (name, device).
+#[allow(clippy::too_many_arguments)]
+fn run_info(
+    d: &Dataset,
+    g: &SubjectGroup,
+    t: &TrialEntry,
+    hash: &str,
+    cal: &Calibrated,
+    trial: &dyn TrialFrames,
+    opt: &ConvertOptions,
+    backend: (&str, &str),
+) -> RunInfo {
     let ctx = cal.ctx();
     let overrides = serde_json::to_string(&d.settings).unwrap_or_default();
     let mut run = RunInfo::new();
@@ -480,8 +651,8 @@ fn solve_one(
         ("subject", &g.subject),
         ("trial", &t.rel),
         ("model", &ctx.model_source),
-        ("backend", "cpu"),
-        ("adapter", "cpu"),
+        ("backend", backend.0),
+        ("adapter", backend.1),
         ("qp_backend", &format!("{:?}", ctx.settings.qp).to_lowercase()),
         ("frames", &trial.header().n_frames().to_string()),
         ("first_sample_time_s", &trial.header().times.first().copied().unwrap_or(0.0).to_string()),
@@ -490,16 +661,24 @@ fn solve_one(
     ] {
         run.insert(k.into(), v.into());
     }
-    run.insert("epoch_ns".into(), writer.epoch_ns.to_string());
-    match solve_and_write(out, &t.rel, trial.as_ref(), cal, &run, writer, progress.map(|p| &p.frames_done)) {
-        Ok(s) => TrialOutcome {
-            frames: s.frames,
-            solve_s: s.solve_s,
-            ms_per_frame: Some(s.ms_per_frame),
-            iterations: Some(s.iterations),
-            rmse_mm: s.rmse_mm,
-            ..outcome(d, g, t, out, if s.suspect.is_some() { "suspect" } else { "ok" }, s.suspect.clone())
-        },
-        Err(e) => fail(e),
+    run.insert("epoch_ns".into(), opt.writer.epoch_ns.to_string());
+    run
+}
+
+#[cfg(test)]
+mod tests {
+    use super::batches;
+
+    #[test]
+    fn batches_fill_the_lanes_bound_what_they_hold_and_cover_every_trial_once() {
+        assert_eq!(batches(&[], 4, 4096), []);
+        assert_eq!(batches(&[100, 100, 100], 1, 4096), [(0, 1), (1, 2), (2, 3)]);
+        // 1, 2 and 5 segments: a batch ends once its segments fill the lanes.
+        assert_eq!(batches(&[100, 450, 1000, 100], 3, 4096), [(0, 2), (2, 3), (3, 4)]);
+        assert_eq!(batches(&[100; 300], 4096, 4096), [(0, 128), (128, 256), (256, 300)]);
+        // Held frames: a window each at most.
+        assert_eq!(batches(&[4096; 40], 1 << 20, 4096), [(0, 32), (32, 40)]);
+        assert_eq!(batches(&[100_000; 40], 1 << 20, 8192), [(0, 16), (16, 32), (32, 40)]);
+        assert_eq!(batches(&[1 << 40, 10], 1 << 20, 1 << 20), [(0, 1), (1, 2)]);
     }
 }

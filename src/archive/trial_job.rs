@@ -10,12 +10,14 @@
 use super::config::Dataset;
 use super::mcap_out::{McapOutError, RunInfo, TrialNames, TrialWriter, WriterOptions};
 use crate::io::MarkerFile;
+use crate::kinematics::backend::BatchBackend;
 use crate::pipeline::convention::{conform_trial, decide_conventions, Conform, InputOptions};
 use crate::pipeline::frames::{FileFrames, TrialFrames};
 use crate::pipeline::stats::P50P90;
+use crate::pipeline::stream::{solve_trials_streaming, TrialStream};
 use crate::pipeline::trial::SinkError;
 use crate::pipeline::verdict::{Judge, Verdict};
-use crate::pipeline::{solve_trial_streaming, Context, SolvedFrame};
+use crate::pipeline::{Context, SolvedFrame};
 use crate::solve::Calibration;
 use std::path::Path;
 
@@ -102,7 +104,8 @@ pub struct Solved {
 
 /// Solves `trial` and streams it to `out` (via its `.partial` file); `run` is the `smocap.run`
 /// metadata; `frames_done` counts frames as they are written (progress display). On any error
-/// the temporary file is removed and no file has the final name.
+/// the temporary file is removed and no file has the final name. Solved on the caller's thread,
+/// one lane, on the CPU backend.
 pub fn solve_and_write(
     out: &Path,
     name: &str,
@@ -112,76 +115,175 @@ pub fn solve_and_write(
     opt: &WriterOptions,
     frames_done: Option<&std::sync::atomic::AtomicU64>,
 ) -> Result<Solved, String> {
+    let job = [TrialJob { out, name, trial, run }];
+    solve_and_write_all(&job, cal, opt, frames_done, Solver { threads: 1, lanes: 1, backend: None })
+        .pop()
+        .expect("one result per trial")
+}
+
+/// One trial of [`solve_and_write_all`]: where it goes, its name, frames and `smocap.run`.
+pub struct TrialJob<'a> {
+    pub out: &'a Path,
+    pub name: &'a str,
+    pub trial: &'a dyn TrialFrames,
+    pub run: &'a RunInfo,
+}
+
+/// How [`solve_and_write_all`] solves: worker threads for the QPs, lanes of the scheduler, and
+/// the evaluation backend (the CPU backend when `None`).
+pub struct Solver<'b> {
+    pub threads: usize,
+    pub lanes: usize,
+    pub backend: Option<&'b mut (dyn BatchBackend + 'b)>,
+}
+
+/// What a trial's sink keeps while its frames go to its writer thread.
+struct Collect {
+    tx: Option<std::sync::mpsc::SyncSender<Vec<SolvedFrame>>>,
+    batch: Vec<SolvedFrame>,
+    judge: Judge,
+    ms: Vec<f64>,
+    it: Vec<f64>,
+    rmse: Vec<f64>,
+    secs: f64,
+}
+
+impl Collect {
+    fn take(&mut self, f: SolvedFrame) -> Result<(), SinkError> {
+        self.judge.frame(f.index, &f.proxies, &f.stats, f.bridged);
+        if self.judge.nonfinite().is_some() {
+            return Err("the solver's result is not finite".into());
+        }
+        self.secs += f.seconds;
+        self.ms.push(f.seconds * 1e3);
+        self.it.push(f.stats.iterations as f64);
+        self.rmse.push(f.stats.rmse_m * 1e3);
+        self.batch.push(f);
+        if self.batch.len() == BATCH_FRAMES {
+            let full = std::mem::replace(&mut self.batch, Vec::with_capacity(BATCH_FRAMES));
+            // Fails only when the writer stopped, whose own error is the one reported.
+            let tx = self.tx.as_ref().ok_or("the writer stopped")?;
+            tx.send(full).map_err(|_| "the writer stopped")?;
+        }
+        Ok(())
+    }
+}
+
+type Writing<'s, 'w> = std::thread::ScopedJoinHandle<'s, Result<TrialWriter<'w>, (usize, McapOutError)>>;
+
+/// [`solve_and_write`] for several trials of one subject solved together
+/// ([`crate::pipeline::stream::solve_trials_streaming`]: their segments share the lanes, so
+/// that short trials fill a batch of a device backend together); one writer thread per trial.
+/// Each trial's file is the same as when it is solved alone. One result per trial, in order.
+pub fn solve_and_write_all(
+    jobs: &[TrialJob<'_>],
+    cal: &Calibrated,
+    opt: &WriterOptions,
+    frames_done: Option<&std::sync::atomic::AtomicU64>,
+    solver: Solver<'_>,
+) -> Vec<Result<Solved, String>> {
     let ctx = cal.ctx();
-    if let Some(parent) = out.parent() {
+    let mut results: Vec<Option<Result<Solved, String>>> = jobs.iter().map(|_| None).collect();
+    std::thread::scope(|scope| {
+        // Writers first: a trial whose file cannot be created is not solved.
+        let mut live: Vec<(usize, Collect, Writing<'_, '_>)> = Vec::new();
+        for (i, job) in jobs.iter().enumerate() {
+            match start_writer(scope, job, cal, opt, frames_done) {
+                Ok((tx, writing)) => {
+                    let n = job.trial.header().n_frames();
+                    let c = Collect {
+                        tx: Some(tx),
+                        batch: Vec::with_capacity(BATCH_FRAMES),
+                        judge: Judge::default(),
+                        ms: Vec::with_capacity(n),
+                        it: Vec::with_capacity(n),
+                        rmse: Vec::with_capacity(n),
+                        secs: 0.0,
+                    };
+                    live.push((i, c, writing));
+                }
+                Err(e) => results[i] = Some(Err(e)),
+            }
+        }
+        let started: Vec<usize> = live.iter().map(|(i, ..)| *i).collect();
+        let solved = {
+            let mut sinks: Vec<_> =
+                live.iter_mut().map(|(_, c, _)| move |f: SolvedFrame| -> Result<(), SinkError> { c.take(f) }).collect();
+            let streams = started
+                .iter()
+                .zip(sinks.iter_mut())
+                .map(|(&i, sink)| TrialStream { name: jobs[i].name, trial: jobs[i].trial, sink })
+                .collect();
+            let Solver { threads, lanes, backend } = solver;
+            solve_trials_streaming(ctx, streams, &cal.calibration, threads, lanes, backend)
+        };
+        for ((i, mut c, writing), solved) in live.into_iter().zip(solved) {
+            let mut solved = solved.map_err(|e| e.to_string());
+            let tx = c.tx.take().expect("the sender is kept until the solve ends");
+            if solved.is_ok() && !c.batch.is_empty() && tx.send(std::mem::take(&mut c.batch)).is_err() {
+                solved = Err("the writer stopped".into());
+            }
+            drop(tx);
+            results[i] = Some(finish_trial(&jobs[i], cal, solved, writing.join(), c));
+        }
+    });
+    results.into_iter().map(|r| r.expect("one result per trial")).collect()
+}
+
+/// Creates `job`'s file and starts its writer thread, fed batches of solved frames.
+fn start_writer<'s, 'w>(
+    scope: &'s std::thread::Scope<'s, 'w>,
+    job: &'w TrialJob<'w>,
+    cal: &'w Calibrated,
+    opt: &WriterOptions,
+    frames_done: Option<&'w std::sync::atomic::AtomicU64>,
+) -> Result<(std::sync::mpsc::SyncSender<Vec<SolvedFrame>>, Writing<'s, 'w>), String> {
+    let ctx = cal.ctx();
+    if let Some(parent) = job.out.parent() {
         std::fs::create_dir_all(parent).map_err(|e| format!("{}: {e}", parent.display()))?;
     }
-    let field = |k: &str| run.get(k).cloned().unwrap_or_default();
+    let field = |k: &str| job.run.get(k).cloned().unwrap_or_default();
     let names = TrialNames { dataset: field("dataset"), subject: field("subject"), trial: field("trial") };
-    let mut writer =
-        TrialWriter::create(out, ctx, trial.header(), &cal.calibration, &names, opt).map_err(|e| e.to_string())?;
-    let n = trial.header().n_frames();
-    let (mut ms, mut it, mut rmse, mut secs) =
-        (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n), 0.0);
-    let mut judge = Judge::default();
-    let (solved, written) = std::thread::scope(|scope| {
-        // Frames go over in batches of BATCH_FRAMES: one wake-up of the writer per batch, not
-        // per frame (per-frame hand-over cost 7 % of a short trial's conversion in `perf`).
-        let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<SolvedFrame>>(QUEUE_FRAMES / BATCH_FRAMES);
-        let writing = std::thread::Builder::new()
-            .name("smocap-writer".into())
-            .spawn_scoped(scope, move || -> Result<TrialWriter<'_>, (usize, McapOutError)> {
-                for batch in rx {
-                    for f in &batch {
-                        writer.frame(f).map_err(|e| (f.index, e))?;
-                    }
-                    if let Some(c) = frames_done {
-                        c.fetch_add(batch.len() as u64, std::sync::atomic::Ordering::Relaxed);
-                    }
+    let mut writer = TrialWriter::create(job.out, ctx, job.trial.header(), &cal.calibration, &names, opt)
+        .map_err(|e| e.to_string())?;
+    // Frames go over in batches of BATCH_FRAMES: one wake-up of the writer per batch, not
+    // per frame (per-frame hand-over cost 7 % of a short trial's conversion in `perf`).
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<SolvedFrame>>(QUEUE_FRAMES / BATCH_FRAMES);
+    let writing = std::thread::Builder::new()
+        .name("smocap-writer".into())
+        .spawn_scoped(scope, move || -> Result<TrialWriter<'w>, (usize, McapOutError)> {
+            for batch in rx {
+                for f in &batch {
+                    writer.frame(f).map_err(|e| (f.index, e))?;
                 }
-                Ok(writer)
-            })
-            .map_err(|e| format!("starting the writer thread: {e}"));
-        let writing = match writing {
-            Ok(w) => w,
-            Err(e) => return (Err(e), None),
-        };
-        let mut batch = Vec::with_capacity(BATCH_FRAMES);
-        let mut sink = |f: SolvedFrame| -> Result<(), SinkError> {
-            judge.frame(f.index, &f.proxies, &f.stats, f.bridged);
-            if judge.nonfinite().is_some() {
-                return Err("the solver's result is not finite".into());
+                if let Some(c) = frames_done {
+                    c.fetch_add(batch.len() as u64, std::sync::atomic::Ordering::Relaxed);
+                }
             }
-            secs += f.seconds;
-            ms.push(f.seconds * 1e3);
-            it.push(f.stats.iterations as f64);
-            rmse.push(f.stats.rmse_m * 1e3);
-            batch.push(f);
-            if batch.len() == BATCH_FRAMES {
-                let full = std::mem::replace(&mut batch, Vec::with_capacity(BATCH_FRAMES));
-                // Fails only when the writer stopped, whose own error is the one reported.
-                tx.send(full).map_err(|_| "the writer stopped")?;
-            }
-            Ok(())
-        };
-        let mut solved =
-            solve_trial_streaming(ctx, name, trial, &cal.calibration, 1, 1, None, &mut sink).map_err(|e| e.to_string());
-        drop(sink);
-        if solved.is_ok() && !batch.is_empty() && tx.send(batch).is_err() {
-            solved = Err("the writer stopped".into());
-        }
-        drop(tx);
-        (solved, Some(writing.join()))
-    });
+            Ok(writer)
+        })
+        .map_err(|e| format!("starting the writer thread: {e}"))?;
+    Ok((tx, writing))
+}
+
+/// A trial's outcome once solved and written: its file finished (renamed to its final name) or
+/// removed.
+fn finish_trial(
+    job: &TrialJob<'_>,
+    cal: &Calibrated,
+    solved: Result<crate::pipeline::StreamedTrial, String>,
+    written: std::thread::Result<Result<TrialWriter<'_>, (usize, McapOutError)>>,
+    c: Collect,
+) -> Result<Solved, String> {
+    let name = job.name;
     let writer = match written {
-        Some(Ok(Ok(w))) => w,
-        Some(Ok(Err((frame, e)))) => return Err(format!("trial '{name}': frame {frame}: {e}")),
-        Some(Err(_)) => return Err(format!("trial '{name}': the writer thread panicked")),
-        None => return Err(solved.err().unwrap_or_default()),
+        Ok(Ok(w)) => w,
+        Ok(Err((frame, e))) => return Err(format!("trial '{name}': frame {frame}: {e}")),
+        Err(_) => return Err(format!("trial '{name}': the writer thread panicked")),
     };
     solved?;
-    let mut run = run.clone();
-    let verdict = judge.verdict();
+    let mut run = job.run.clone();
+    let verdict = c.judge.verdict();
     match &verdict {
         // Dropping the writer removes its temporary file.
         Verdict::Failed(why) => return Err(why.clone()),
@@ -192,6 +294,7 @@ pub fn solve_and_write(
         Verdict::Ok => {}
     }
     writer.finish(&run, &cal.settings_json, cal.scaled_model.as_deref()).map_err(|e| e.to_string())?;
+    let Collect { mut ms, it, mut rmse, secs, .. } = c;
     rmse.retain(|x: &f64| x.is_finite());
     ms.retain(|x: &f64| x.is_finite());
     Ok(Solved {

@@ -6,7 +6,7 @@ use crate::archive::progress::{Display, Mode, Progress};
 use crate::archive::shard::Shard;
 use crate::archive::{convert, ConvertOptions};
 use anyhow::Context as _;
-use clap::Args;
+use clap::{Args, ValueEnum as _};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
@@ -64,6 +64,17 @@ pub struct ConvertArgs {
     #[arg(long, default_value_t = crate::archive::trial_job::WINDOW_FRAMES, value_name = "FRAMES",
         value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
     pub window_frames: usize,
+    /// Evaluation backend: `cpu` (default; the f64 reference: one lane per trial, trials in
+    /// parallel); `wgpu` / `wgpu-f64` (a device backend per subject, its trials solved in
+    /// batches whose segments share the lanes); `auto`: wgpu only on a real GPU, else the CPU
+    /// backend with a note. `wgpu` without an adapter is an error before any work.
+    #[arg(long, value_enum, default_value_t = crate::pipeline::device::BackendChoice::Cpu)]
+    pub backend: crate::pipeline::device::BackendChoice,
+    /// Lanes of the scheduler (segments in flight) of a subject's trials solved in batches:
+    /// default 4096 on wgpu; given with the CPU backend, trials are solved in batches too. The
+    /// lane count changes the speed, not the result.
+    #[arg(long)]
+    pub lanes: Option<usize>,
 }
 
 fn parse_epoch(s: &str) -> Result<u64, String> {
@@ -76,6 +87,19 @@ pub fn run(a: ConvertArgs) -> anyhow::Result<u8> {
         Some(s) => Some(s),
         None => Shard::from_env(|k| std::env::var(k).ok())?,
     };
+    if let Some(l) = a.lanes {
+        anyhow::ensure!((1..=1 << 20).contains(&l), "--lanes {l}: expected 1 to {}", 1 << 20);
+    }
+    // Settled once for the run (each subject then builds its own backend).
+    let (backend, note) = crate::pipeline::device::settle(a.backend).map_err(|e| {
+        anyhow::anyhow!(
+            "--backend {}: {e}",
+            a.backend.to_possible_value().map_or("?".into(), |v| v.get_name().to_string())
+        )
+    })?;
+    if let Some(note) = note {
+        eprintln!("note: {note}");
+    }
     let progress = Arc::new(Progress::default());
     let opt = ConvertOptions {
         out: a.out.clone(),
@@ -90,6 +114,8 @@ pub fn run(a: ConvertArgs) -> anyhow::Result<u8> {
             ..WriterOptions::default()
         },
         window_frames: a.window_frames,
+        backend,
+        lanes: a.lanes,
     };
     let every = Duration::try_from_secs_f64(a.progress_every)
         .ok()

@@ -87,22 +87,10 @@ pub fn choose_with(
         BackendChoice::WgpuF64 => Ok(Chosen::Wgpu(Box::new(WgpuBackend::with_options(eval, cap, F64, kernel)?))),
         BackendChoice::Auto => {
             let adapters = gpu::list_adapters();
-            let Some(best) = adapters.first() else {
-                return Ok(Chosen::Cpu {
-                    note: Some(format!(
-                        "backend auto: no wgpu adapter found on {}; using the CPU backend",
-                        gpu::searched_backends()
-                    )),
-                });
-            };
-            if !best.real_gpu {
-                return Ok(Chosen::Cpu {
-                    note: Some(format!(
-                        "backend auto: the best wgpu adapter, {best}, is not a real GPU (a CPU adapter \
-                         such as lavapipe is slower than the CPU backend); using the CPU backend"
-                    )),
-                });
+            if let Some(note) = auto_stays_on_cpu(&adapters) {
+                return Ok(Chosen::Cpu { note: Some(note) });
             }
+            let best = &adapters[0];
             match WgpuBackend::with_options(eval, cap, F32, kernel) {
                 Ok(b) => Ok(Chosen::Wgpu(Box::new(b))),
                 Err(e) => Ok(Chosen::Cpu {
@@ -110,5 +98,44 @@ pub fn choose_with(
                 }),
             }
         }
+    }
+}
+
+/// Why `auto` takes the CPU backend with these adapters (best first): none, or the best is not
+/// a real GPU. `None` when `auto` tries wgpu.
+fn auto_stays_on_cpu(adapters: &[gpu::AdapterSummary]) -> Option<String> {
+    let Some(best) = adapters.first() else {
+        return Some(format!(
+            "backend auto: no wgpu adapter found on {}; using the CPU backend",
+            gpu::searched_backends()
+        ));
+    };
+    (!best.real_gpu).then(|| {
+        format!(
+            "backend auto: the best wgpu adapter, {best}, is not a real GPU (a CPU adapter such as lavapipe is \
+             slower than the CPU backend); using the CPU backend"
+        )
+    })
+}
+
+/// The choice settled before any work, for a command that builds one backend per subject
+/// (`smocap convert`): `auto` becomes `cpu` (with the note saying why) where it would not take
+/// wgpu, and `wgpu`/`wgpu-f64` without any adapter is an error, so that a run does not find out
+/// subject by subject. (Whether an adapter offers `SHADER_F64`, or a device can be created, is
+/// found when the backend is built.)
+pub fn settle(choice: BackendChoice) -> Result<(BackendChoice, Option<String>), BackendError> {
+    match choice {
+        BackendChoice::Cpu => Ok((choice, None)),
+        BackendChoice::Wgpu | BackendChoice::WgpuF64 => {
+            if gpu::list_adapters().is_empty() {
+                Err(BackendError::NoAdapter(format!("none found on {}", gpu::searched_backends())))
+            } else {
+                Ok((choice, None))
+            }
+        }
+        BackendChoice::Auto => match auto_stays_on_cpu(&gpu::list_adapters()) {
+            Some(note) => Ok((BackendChoice::Cpu, Some(note))),
+            None => Ok((choice, None)),
+        },
     }
 }

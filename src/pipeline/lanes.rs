@@ -8,6 +8,11 @@
 //! accept/reject decisions on the pool. Lanes whose frame is done start their next frame (a cold
 //! start, on the CPU, at the beginning of a segment); lanes whose segment ends take the next
 //! segment from the queue. The solver never knows which [`BatchBackend`] evaluated.
+//!
+//! The queue may hold segments of several trials of one subject ([`run_lanes_across`]): each
+//! segment carries its trial's [`TrialInputs`], so that a round's batch holds lanes of several
+//! trials and short trials together fill a GPU batch. A lane's result depends only on its
+//! segment, so it is the same whatever else is in the queue.
 
 use crate::io::MarkerTrial;
 use crate::kinematics::assembly::{fold_tracking_reference, Evaluator, FrameProblem};
@@ -67,6 +72,8 @@ pub type FrameResult = (Vec<f64>, FrameStats, f64);
 
 struct Lane<'e> {
     solver: FrameSolver<'e>,
+    /// The trial (index into the inputs) of the current segment.
+    trial: usize,
     /// Current segment `[a, b)` and frame.
     seg: Option<(usize, usize)>,
     frame: usize,
@@ -91,6 +98,7 @@ impl<'e> Lane<'e> {
         let (np, ny) = (eval.proxy.np(), eval.model.ny());
         Lane {
             solver: FrameSolver::new(eval, settings.clone(), make_qp(settings.qp)),
+            trial: 0,
             seg: None,
             frame: 0,
             emit_from: 0,
@@ -176,7 +184,7 @@ impl<'e> Lane<'e> {
 /// and its frames from `a` are handed on, so that its first frame continues a tracked motion as
 /// the previous segment's last one does. Each lane's result depends only on its segment, not on
 /// the lane count or on which lane walked it. An error from `done` stops the run and is
-/// returned. Runs on the current rayon pool.
+/// returned. Runs on the current rayon pool. [`run_lanes_across`] with one trial.
 #[allow(clippy::too_many_arguments)]
 pub fn run_lanes<E: From<BackendError>>(
     eval: &Evaluator<'_>,
@@ -188,7 +196,31 @@ pub fn run_lanes<E: From<BackendError>>(
     backend: &mut dyn BatchBackend,
     done: &mut dyn FnMut(usize, FrameResult) -> Result<(), E>,
 ) -> Result<(), E> {
-    let mut queue: VecDeque<(usize, usize)> = segments.iter().copied().filter(|(a, b)| b > a).collect();
+    let segments: Vec<(usize, (usize, usize))> = segments.iter().map(|&s| (0, s)).collect();
+    let mut done = |_: usize, f: usize, r: FrameResult| done(f, r);
+    run_lanes_across(eval, settings, std::slice::from_ref(inp), &segments, run_in, lanes, backend, &mut done)
+}
+
+/// [`run_lanes`] over segments of several trials solved with one evaluator (one subject's trials
+/// at its calibrated morphology): `segments` are `(trial, [a, b))`, `trial` indexing `trials`,
+/// handed out to the lanes in this order, and `done` receives `(trial, frame, result)`. Each
+/// round's batch holds the lanes of whichever trials they walk, so that trials too short to fill
+/// a batch fill it together. Each frame's result depends only on its own segment (its trial's
+/// inputs and frames): the same whether its trial is solved alone or with others, whatever the
+/// order of the queue and the lane count.
+#[allow(clippy::too_many_arguments)]
+pub fn run_lanes_across<E: From<BackendError>>(
+    eval: &Evaluator<'_>,
+    settings: &SolverSettings,
+    trials: &[TrialInputs<'_>],
+    segments: &[(usize, (usize, usize))],
+    run_in: usize,
+    lanes: usize,
+    backend: &mut dyn BatchBackend,
+    done: &mut dyn FnMut(usize, usize, FrameResult) -> Result<(), E>,
+) -> Result<(), E> {
+    let mut queue: VecDeque<(usize, (usize, usize))> =
+        segments.iter().copied().filter(|(t, (a, b))| b > a && *t < trials.len()).collect();
     let n_lanes = lanes.max(1).min(queue.len().max(1));
     let mut lanes: Vec<Lane<'_>> = (0..n_lanes).map(|_| Lane::new(eval, settings)).collect();
     let presolve = settings.presolve == Presolve::Always;
@@ -200,7 +232,7 @@ pub fn run_lanes<E: From<BackendError>>(
             let Next::Done(stats) = lane.next else { continue };
             if lane.it.take().is_some() {
                 if lane.frame >= lane.emit_from {
-                    done(lane.frame, (lane.p.clone(), stats, lane.started.elapsed().as_secs_f64()))?;
+                    done(lane.trial, lane.frame, (lane.p.clone(), stats, lane.started.elapsed().as_secs_f64()))?;
                 }
                 if stats.status != FrameStatus::TooFewMarkers {
                     let old = lane.prev2.take();
@@ -212,27 +244,32 @@ pub fn run_lanes<E: From<BackendError>>(
                 lane.frame += 1;
             }
             if lane.seg.is_none_or(|(_, b)| lane.frame >= b) {
-                lane.seg = queue.pop_front();
+                let next = queue.pop_front();
+                lane.seg = next.map(|(_, s)| s);
                 lane.prev = None;
                 lane.prev2 = None;
-                if let Some((a, _)) = lane.seg {
+                if let Some((t, (a, _))) = next {
+                    lane.trial = t;
                     lane.frame = a.saturating_sub(run_in);
                     lane.emit_from = a;
                 }
             }
         }
-        lanes.par_iter_mut().filter(|l| l.seg.is_some() && l.it.is_none()).for_each(|l| l.start_frame(inp, presolve));
+        lanes
+            .par_iter_mut()
+            .filter(|l| l.seg.is_some() && l.it.is_none())
+            .for_each(|l| l.start_frame(&trials[l.trial], presolve));
         if lanes.iter().all(|l| l.seg.is_none()) {
             break;
         }
 
         // One batched linearisation; each lane's QP reads its model where the backend left it.
-        linearize_round(&mut lanes, inp, &mut px, backend)?;
+        linearize_round(&mut lanes, trials, &mut px, backend)?;
         // One batched energy evaluation of the trial points, then accept or reject.
         let k = batch(
             &lanes,
             |n| matches!(n, Next::Energy),
-            inp,
+            trials,
             &mut px,
             |l| l.solver.trial(),
             |f, p| backend.energy(f, p, &mut energies[..f.len()]),
@@ -340,7 +377,7 @@ impl GnSink for LaneSink<'_, '_> {
 /// is handed over ([`BatchBackend::linearize_into`]).
 fn linearize_round(
     lanes: &mut [Lane<'_>],
-    inp: &TrialInputs<'_>,
+    trials: &[TrialInputs<'_>],
     px: &mut Vec<f64>,
     backend: &mut dyn BatchBackend,
 ) -> Result<(), BackendError> {
@@ -348,7 +385,8 @@ fn linearize_round(
     let mut frames = Vec::new();
     let mut sinks = Vec::new();
     for l in lanes.iter_mut().filter(|l| matches!(l.next, Next::Linearize)) {
-        let Lane { solver, it, next, p, obs, reference, .. } = l;
+        let Lane { solver, it, next, p, obs, reference, trial, .. } = l;
+        let inp = &trials[*trial];
         frames.push(FrameProblem {
             observed: obs,
             marker_weights: inp.marker_weights,
@@ -369,7 +407,7 @@ fn linearize_round(
 fn batch<'l>(
     lanes: &'l [Lane<'_>],
     what: impl Fn(&Next) -> bool,
-    inp: &TrialInputs<'l>,
+    trials: &'l [TrialInputs<'l>],
     px: &mut Vec<f64>,
     point: impl Fn(&'l Lane<'_>) -> &'l [f64],
     mut eval: impl FnMut(&[FrameProblem<'_>], &[f64]) -> Result<(), BackendError>,
@@ -377,7 +415,7 @@ fn batch<'l>(
     px.clear();
     let mut frames = Vec::new();
     for l in lanes.iter().filter(|l| what(&l.next)) {
-        frames.push(l.frame_problem(inp));
+        frames.push(l.frame_problem(&trials[l.trial]));
         px.extend_from_slice(point(l));
     }
     if !frames.is_empty() {

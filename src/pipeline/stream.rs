@@ -4,18 +4,24 @@
 //! Frames leave in frame order. Frames with too few markers wait until the next solved frame
 //! (they are bridged between their solved neighbours, see [`super::trial`]); with several lanes,
 //! frames of later segments wait for the earlier segments. With one lane (what `smocap convert`
-//! uses), what is held beyond the input trial is the current gap of unsolved frames.
+//! uses on the CPU backend), what is held beyond the input trial is the current gap of unsolved
+//! frames. Several trials of one subject can be solved together ([`solve_trials_streaming`]),
+//! their segments sharing the lanes, each trial's frames still leaving in its own frame order.
 
 use super::frames::{for_each_window, TrialFrames};
-use super::lanes::{resolve_outliers_above, run_lanes, FrameObservations, FrameResult, TrialInputs};
+use super::lanes::{resolve_outliers_above, run_lanes_across, FrameObservations, FrameResult, TrialInputs};
+use super::matching::MarkerMatch;
 use super::stats::GapStats;
 use super::trial::{match_markers, no_match, GapRuns, SinkError, TrialError, TrialResult};
 use super::Context;
 use crate::io::MarkerTrial;
+use crate::kinematics::assembly::Evaluator;
 use crate::kinematics::backend::{BackendError, BatchBackend, CpuBackend};
 use crate::model::proxy::ProxyKind;
 use crate::solve::init::wrap_angle;
-use crate::solve::{Calibration, FrameStats, FrameStatus, Presolve};
+use crate::solve::{Calibration, FrameStats, FrameStatus, Presolve, SolverSettings};
+use rayon::prelude::*;
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::time::Instant;
 
@@ -53,7 +59,8 @@ pub struct StreamedTrial {
     pub gaps: GapStats,
     /// Frames whose result came from the `auto` pre-solve pass (outliers solved again).
     pub presolved: Vec<usize>,
-    /// Wall time of all frames (s), calibration excluded, sink included.
+    /// Wall time of all frames (s), calibration excluded, sink included (of trials solved
+    /// together, [`solve_trials_streaming`]: of them all).
     pub wall_seconds: f64,
     pub threads: usize,
 }
@@ -62,6 +69,36 @@ enum Stop {
     Backend(BackendError),
     Sink(usize, SinkError),
     Read(String),
+    /// Every trial of the run failed: nothing left to solve for.
+    AllFailed,
+}
+
+impl Stop {
+    /// The trial's error.
+    fn into_error(self, trial: &str) -> TrialError {
+        let trial = trial.into();
+        match self {
+            Stop::Backend(source) => TrialError::Backend { trial, source },
+            Stop::Sink(frame, source) => TrialError::Output { trial, frame, source },
+            Stop::Read(why) => TrialError::Read { trial, why },
+            Stop::AllFailed => TrialError::Read { trial, why: "stopped".into() },
+        }
+    }
+
+    /// The same stop, for each of the trials a backend error stopped (only a backend error is
+    /// shared).
+    fn copy(&self) -> Stop {
+        match self {
+            Stop::Backend(BackendError::NoAdapter(m)) => Stop::Backend(BackendError::NoAdapter(m.clone())),
+            Stop::Backend(BackendError::Device { adapter, message }) => {
+                Stop::Backend(BackendError::Device { adapter: adapter.clone(), message: message.clone() })
+            }
+            Stop::Backend(BackendError::Shape(m)) => Stop::Backend(BackendError::Shape(m.clone())),
+            Stop::Sink(_, e) => Stop::Read(e.to_string()),
+            Stop::Read(why) => Stop::Read(why.clone()),
+            Stop::AllFailed => Stop::AllFailed,
+        }
+    }
 }
 
 impl From<BackendError> for Stop {
@@ -84,7 +121,11 @@ struct Orderer<'a> {
     bridged: usize,
 }
 
-impl Orderer<'_> {
+impl<'a> Orderer<'a> {
+    fn new(ctx: &'a Context, calibrated: &'a [f64]) -> Orderer<'a> {
+        Orderer { ctx, calibrated, next: 0, early: BTreeMap::new(), last: None, gap: Vec::new(), bridged: 0 }
+    }
+
     /// Takes frame `f`'s result; `obs` is the window it lies in, frame `f` at `f - first`.
     fn push(
         &mut self,
@@ -161,16 +202,21 @@ pub const SEGMENT_FRAMES: usize = 200;
 /// would in an uncut trial.
 pub const SEGMENT_RUN_IN: usize = 20;
 
+/// How many [`segments`] a trial of `n` frames has: `max(1, n / SEGMENT_FRAMES)`.
+pub fn segment_count(n: usize) -> usize {
+    (n / SEGMENT_FRAMES).max(1)
+}
+
 /// The segments of a trial of `n` frames: `[a, b)` ranges covering `0..n`, a function of `n`
 /// alone (see [`SEGMENT_FRAMES`]).
 pub fn segments(n: usize) -> Vec<(usize, usize)> {
-    let k = (n / SEGMENT_FRAMES).max(1);
+    let k = segment_count(n);
     (0..k).map(|i| (i * n / k, (i + 1) * n / k)).collect()
 }
 
 /// Solves every frame of `trial` like [`super::solve_trial_with`], handing each frame to `sink`
 /// in frame order as soon as it is known. An error from `sink` stops the solve
-/// ([`TrialError::Output`]).
+/// ([`TrialError::Output`]). [`solve_trials_streaming`] with one trial.
 #[allow(clippy::too_many_arguments)]
 pub fn solve_trial_streaming(
     ctx: &Context,
@@ -182,32 +228,96 @@ pub fn solve_trial_streaming(
     backend: Option<&mut (dyn BatchBackend + '_)>,
     sink: &mut FrameSink<'_>,
 ) -> Result<StreamedTrial, TrialError> {
+    let one = vec![TrialStream { name, trial, sink }];
+    solve_trials_streaming(ctx, one, calibration, threads, lanes, backend).pop().expect("one result per trial")
+}
+
+/// One trial of [`solve_trials_streaming`]: its name, its frames and where its solved frames go.
+pub struct TrialStream<'a, 's> {
+    pub name: &'a str,
+    pub trial: &'a dyn TrialFrames,
+    pub sink: &'a mut FrameSink<'s>,
+}
+
+/// A trial being solved by [`solve_trials_streaming`].
+struct Job<'a, 's, 'c> {
+    /// Index of the trial in the caller's list.
+    index: usize,
+    name: &'a str,
+    trial: &'a dyn TrialFrames,
+    sink: &'a mut FrameSink<'s>,
+    runs: GapRuns,
+    n: usize,
+    /// Its segments, and the runs of them read together (one window each).
+    bounds: Vec<(usize, usize)>,
+    groups: Vec<(usize, usize)>,
+    order: Orderer<'c>,
+    /// `auto` pre-solve: every solved frame, held until the pass ([`resolve_outliers_above`]).
+    held: Vec<Option<FrameResult>>,
+    presolved: Vec<usize>,
+    /// Why it stopped (its frames still in flight are then dropped).
+    failed: Option<TrialError>,
+}
+
+/// Solves several trials of one subject (one calibration, one evaluator, one `backend`) together,
+/// each like [`solve_trial_streaming`]: the segments of all of them go into one lane scheduler
+/// ([`run_lanes_across`]), so that every batched evaluation holds lanes of several trials, and
+/// each trial's frames go to its own sink in frame order. Returns one result per trial, in
+/// order; a trial whose sink fails, or whose file cannot be read, fails alone (its frames still in
+/// flight are solved and dropped), a backend error fails every trial it was solving.
+///
+/// Every segment is walked as when its trial is solved alone, so each trial's frames are the
+/// same, bit for bit, however trials are grouped and whatever `lanes` and `threads` are. What is
+/// held is one window of each trial at a time: long trials (more than
+/// [`TrialFrames::window_frames`]) are solved a window after another, the windows of all trials
+/// at step `k` together; with `auto` pre-solve each trial also holds its solved frames (proxies
+/// and statistics) until its pass, as [`solve_trial_streaming`] does, the passes of the trials
+/// running in parallel once every lane has finished.
+pub fn solve_trials_streaming(
+    ctx: &Context,
+    trials: Vec<TrialStream<'_, '_>>,
+    calibration: &Calibration,
+    threads: usize,
+    lanes: usize,
+    backend: Option<&mut (dyn BatchBackend + '_)>,
+) -> Vec<Result<StreamedTrial, TrialError>> {
     let start = Instant::now();
     // One morphology: every frame is solved at the calibrated scales and marker offsets.
     let pinned = ctx.pinned_to(calibration);
     let ctx = &pinned;
-    let header = trial.header();
-    let matched = match_markers(ctx, name, header)?;
-    let map = &matched.columns;
-    if map.iter().all(Option::is_none) {
-        return Err(no_match(ctx, name, header));
-    }
-    if header.n_frames() == 0 {
-        return Err(TrialError::Empty { trial: name.into() });
-    }
-    let read_err = |why: String| TrialError::Read { trial: name.into(), why };
-    // One pass before solving: frames with enough markers, and each column's gaps.
-    let mut solvable = 0;
-    let mut runs = GapRuns::new(header.n_markers());
-    for_each_window(trial, |_, w| {
-        solvable += super::verdict::solvable_frames(ctx, w, map);
-        runs.add(w);
-    })
-    .map_err(read_err)?;
-    if solvable == 0 {
-        return Err(TrialError::NothingSolvable { trial: name.into(), min: ctx.settings.min_markers });
-    }
     let settings = &ctx.settings;
+    let auto = settings.presolve == Presolve::Auto;
+    let mut results: Vec<Option<Result<StreamedTrial, TrialError>>> = trials.iter().map(|_| None).collect();
+    let mut matches = Vec::new();
+    let mut jobs = Vec::new();
+    for (index, TrialStream { name, trial, sink }) in trials.into_iter().enumerate() {
+        match prepare(ctx, name, trial) {
+            Ok((matched, runs)) => {
+                let n = trial.header().n_frames();
+                let bounds = segments(n);
+                let groups = segment_groups(&bounds, trial.window_frames());
+                matches.push(matched);
+                jobs.push(Job {
+                    index,
+                    name,
+                    trial,
+                    sink,
+                    runs,
+                    n,
+                    bounds,
+                    groups,
+                    order: Orderer::new(ctx, &calibration.proxies),
+                    held: if auto { vec![None; n] } else { Vec::new() },
+                    presolved: Vec::new(),
+                    failed: None,
+                });
+            }
+            Err(e) => results[index] = Some(Err(e)),
+        }
+    }
+    if jobs.is_empty() {
+        return results.into_iter().map(|r| r.expect("one result per trial")).collect();
+    }
     let eval = ctx.evaluator();
     let ny = ctx.model.ny();
 
@@ -233,13 +343,9 @@ pub fn solve_trial_streaming(
     // not depend on the lane or thread count. Consecutive segments are read together, as many as
     // fit in a window of the trial (all of them when it is held whole); each segment is solved
     // as it would be in the whole trial, so the result does not depend on the window either.
-    let n = header.n_frames();
     let threads = threads.max(1);
     let lanes = lanes.max(1);
-    let bounds = segments(n);
-    let groups = segment_groups(&bounds, trial.window_frames());
-    let base = TrialInputs {
-        observed: FrameObservations { trial: header, map },
+    let shared = Shared {
         marker_weights: &ctx.marker_weights,
         reference: &y_cal,
         tracking_weights: &track_w,
@@ -249,92 +355,217 @@ pub fn solve_trial_streaming(
         neutral: &neutral,
         calibrated: &calibration.proxies,
     };
-    // Frames `[w0, b)` of the trial for the segments `segs`, and those segments within it.
-    let window = |segs: &[(usize, usize)]| {
-        let (a, b) = (segs[0].0, segs[segs.len() - 1].1);
-        let w0 = a.saturating_sub(SEGMENT_RUN_IN);
-        let rel: Vec<(usize, usize)> = segs.iter().map(|&(a, b)| (a - w0, b - w0)).collect();
-        trial.window(w0..b).map(|w| (w0, w, rel)).map_err(Stop::Read)
-    };
-    let mut order = Orderer {
-        ctx,
-        calibrated: &calibration.proxies,
-        next: 0,
-        early: BTreeMap::new(),
-        last: None,
-        gap: Vec::new(),
-        bridged: 0,
-    };
+    let base = &shared;
     // One thread and one lane run on the caller's thread: no pool to start, and no waiting on
     // one during which a caller's rayon worker would take up other work (e.g. another trial).
     let pool =
         (threads > 1 || lanes > 1).then(|| rayon::ThreadPoolBuilder::new().num_threads(threads).build().ok()).flatten();
-    // `auto` pre-solve needs the whole trial's RMSE (median + 6 MAD) before any frame leaves, so
-    // it holds the solved frames (proxies and statistics, not observations) until its pass ends.
-    let auto = settings.presolve == Presolve::Auto;
-    let mut presolved = Vec::new();
+    let parallel = pool.is_some();
     let mut backend = backend;
-    let mut run = || -> Result<(), Stop> {
-        let mut held: Vec<Option<FrameResult>> = if auto { vec![None; n] } else { Vec::new() };
+    let mut run = || {
         let mut cpu = None;
-        for &(g0, g1) in &groups {
-            let (w0, w, rel) = window(&bounds[g0..g1])?;
-            let obs = FrameObservations { trial: &w, map };
-            let inputs = TrialInputs { observed: obs, ..base };
-            let mut done = |f: usize, r: FrameResult| {
-                if auto {
-                    held[f + w0] = Some(r);
-                    Ok(())
-                } else {
-                    order.push(f + w0, r, (&obs, w0), sink)
+        let steps = jobs.iter().map(|j| j.groups.len()).max().unwrap_or(0);
+        for step in 0..steps {
+            // Group `step` of every trial still going: its window and its segments in it.
+            let mut wins = Vec::new();
+            let mut segs = Vec::new();
+            for (j, job) in jobs.iter_mut().enumerate() {
+                let Some(&(g0, g1)) = job.groups.get(step).filter(|_| job.failed.is_none()) else { continue };
+                let trial = job.trial;
+                match window(trial, &job.bounds[g0..g1]) {
+                    Ok((w0, w, rel)) => {
+                        segs.extend(rel.into_iter().map(|s| (wins.len(), s)));
+                        wins.push((j, w0, w));
+                    }
+                    Err(why) => job.failed = Some(TrialError::Read { trial: job.name.into(), why }),
                 }
+            }
+            if wins.is_empty() {
+                continue;
+            }
+            let inputs: Vec<TrialInputs<'_>> = wins
+                .iter()
+                .map(|(j, _, w)| base.inputs(FrameObservations { trial: w, map: &matches[*j].columns }))
+                .collect();
+            let mut done = |k: usize, f: usize, r: FrameResult| -> Result<(), Stop> {
+                let (j, w0, _) = wins[k];
+                let job = &mut jobs[j];
+                if job.failed.is_some() {
+                    return Ok(());
+                }
+                if auto {
+                    job.held[f + w0] = Some(r);
+                    return Ok(());
+                }
+                if let Err(e) = job.order.push(f + w0, r, (&inputs[k].observed, w0), job.sink) {
+                    job.failed = Some(e.into_error(job.name));
+                    // Nothing left to solve for: stop at once (a trial solved alone stops so).
+                    if wins.iter().all(|(j, ..)| jobs[*j].failed.is_some()) {
+                        return Err(Stop::AllFailed);
+                    }
+                }
+                Ok(())
             };
             let b: &mut dyn BatchBackend = match backend.as_deref_mut() {
                 Some(b) => b,
                 None => cpu.get_or_insert_with(|| CpuBackend::new(eval.clone())),
             };
-            run_lanes(&eval, settings, &inputs, &rel, SEGMENT_RUN_IN, lanes, b, &mut done)?;
-        }
-        if auto {
-            let threshold = outlier_threshold_of(&held);
-            for &(g0, g1) in &groups {
-                let (w0, w, rel) = window(&bounds[g0..g1])?;
-                let obs = FrameObservations { trial: &w, map };
-                let inputs = TrialInputs { observed: obs, ..base };
-                let end = bounds[g1 - 1].1;
-                let kept = resolve_outliers_above(&eval, settings, &inputs, &rel, threshold, &mut held[w0..end]);
-                presolved.extend(kept.into_iter().map(|f| f + w0));
-                for f in bounds[g0].0..end {
-                    let r = held[f].take().expect("every frame lies in one segment");
-                    order.push(f, r, (&obs, w0), sink)?;
+            match run_lanes_across(&eval, settings, &inputs, &segs, SEGMENT_RUN_IN, lanes, b, &mut done) {
+                Ok(()) | Err(Stop::AllFailed) => {}
+                Err(e) => {
+                    for &(j, ..) in &wins {
+                        let job = &mut jobs[j];
+                        if job.failed.is_none() {
+                            job.failed = Some(e.copy().into_error(job.name));
+                        }
+                    }
                 }
             }
         }
-        debug_assert!(order.early.is_empty() && order.next == n, "every frame lies in one segment");
-        order.flush(None, sink)
+        if auto {
+            let pass = |(job, m): (&mut Job<'_, '_, '_>, &MarkerMatch)| {
+                if job.failed.is_none() {
+                    if let Err(e) = presolve_pass(job, m, &eval, settings, base) {
+                        job.failed = Some(e.into_error(job.name));
+                    }
+                }
+            };
+            // In parallel on the run's pool; without one, on the caller's thread.
+            if parallel {
+                jobs.par_iter_mut().zip(matches.par_iter()).for_each(pass);
+            } else {
+                jobs.iter_mut().zip(&matches).for_each(pass);
+            }
+        }
     };
     match &pool {
         Some(pool) => pool.install(run),
         None => run(),
     }
-    .map_err(|e| match e {
-        Stop::Backend(source) => TrialError::Backend { trial: name.into(), source },
-        Stop::Sink(frame, source) => TrialError::Output { trial: name.into(), frame, source },
-        Stop::Read(why) => read_err(why),
-    })?;
+    for (job, matched) in jobs.into_iter().zip(&matches) {
+        let index = job.index;
+        results[index] = Some(finish(ctx, job, matched, start, threads));
+    }
+    results.into_iter().map(|r| r.expect("one result per trial")).collect()
+}
+
+/// What every trial of a subject shares in its [`TrialInputs`].
+struct Shared<'a> {
+    marker_weights: &'a [f64],
+    reference: &'a [f64],
+    tracking_weights: &'a [f64],
+    coordinate_targets: &'a [f64],
+    coordinate_weights: &'a [f64],
+    tracking_weights_all: &'a [f64],
+    neutral: &'a [f64],
+    calibrated: &'a [f64],
+}
+
+impl Shared<'_> {
+    /// The inputs of a trial (or a window of it) observed as `observed`.
+    fn inputs<'b>(&'b self, observed: FrameObservations<'b>) -> TrialInputs<'b> {
+        TrialInputs {
+            observed,
+            marker_weights: self.marker_weights,
+            reference: self.reference,
+            tracking_weights: self.tracking_weights,
+            coordinate_targets: self.coordinate_targets,
+            coordinate_weights: self.coordinate_weights,
+            tracking_weights_all: self.tracking_weights_all,
+            neutral: self.neutral,
+            calibrated: self.calibrated,
+        }
+    }
+}
+
+/// A trial's markers matched to the model's, and one pass over its frames before solving: each
+/// column's gaps, and an error when no frame has enough markers.
+fn prepare(ctx: &Context, name: &str, trial: &dyn TrialFrames) -> Result<(MarkerMatch, GapRuns), TrialError> {
+    let header = trial.header();
+    let matched = match_markers(ctx, name, header)?;
+    let map = &matched.columns;
+    if map.iter().all(Option::is_none) {
+        return Err(no_match(ctx, name, header));
+    }
+    if header.n_frames() == 0 {
+        return Err(TrialError::Empty { trial: name.into() });
+    }
+    let mut solvable = 0;
+    let mut runs = GapRuns::new(header.n_markers());
+    for_each_window(trial, |_, w| {
+        solvable += super::verdict::solvable_frames(ctx, w, map);
+        runs.add(w);
+    })
+    .map_err(|why| TrialError::Read { trial: name.into(), why })?;
+    if solvable == 0 {
+        return Err(TrialError::NothingSolvable { trial: name.into(), min: ctx.settings.min_markers });
+    }
+    Ok((matched, runs))
+}
+
+/// Frames `[w0, b)` of `trial` for the segments `segs`, and those segments within it.
+type Window<'a> = (usize, Cow<'a, MarkerTrial>, Vec<(usize, usize)>);
+
+fn window<'a>(trial: &'a dyn TrialFrames, segs: &[(usize, usize)]) -> Result<Window<'a>, String> {
+    let (a, b) = (segs[0].0, segs[segs.len() - 1].1);
+    let w0 = a.saturating_sub(SEGMENT_RUN_IN);
+    let rel: Vec<(usize, usize)> = segs.iter().map(|&(a, b)| (a - w0, b - w0)).collect();
+    trial.window(w0..b).map(|w| (w0, w, rel))
+}
+
+/// The `auto` pre-solve pass of a trial whose lanes have all finished (its window by window),
+/// handing every frame on in order.
+fn presolve_pass(
+    job: &mut Job<'_, '_, '_>,
+    matched: &MarkerMatch,
+    eval: &Evaluator<'_>,
+    settings: &SolverSettings,
+    base: &Shared<'_>,
+) -> Result<(), Stop> {
+    let threshold = outlier_threshold_of(&job.held);
+    for &(g0, g1) in &job.groups {
+        let (w0, w, rel) = window(job.trial, &job.bounds[g0..g1]).map_err(Stop::Read)?;
+        let obs = FrameObservations { trial: &w, map: &matched.columns };
+        let inputs = base.inputs(obs);
+        let end = job.bounds[g1 - 1].1;
+        let kept = resolve_outliers_above(eval, settings, &inputs, &rel, threshold, &mut job.held[w0..end]);
+        job.presolved.extend(kept.into_iter().map(|f| f + w0));
+        for f in job.bounds[g0].0..end {
+            let r = job.held[f].take().expect("every frame lies in one segment");
+            job.order.push(f, r, (&obs, w0), job.sink)?;
+        }
+    }
+    Ok(())
+}
+
+/// A trial's result once all its frames are solved: the last bridged frames handed on, and what
+/// is known of it.
+fn finish(
+    ctx: &Context,
+    mut job: Job<'_, '_, '_>,
+    matched: &MarkerMatch,
+    start: Instant,
+    threads: usize,
+) -> Result<StreamedTrial, TrialError> {
+    if let Some(e) = job.failed.take() {
+        return Err(e);
+    }
+    debug_assert!(job.order.early.is_empty() && job.order.next == job.n, "every frame lies in one segment");
+    job.order.flush(None, job.sink).map_err(|e| e.into_error(job.name))?;
+    let header = job.trial.header();
     let names: Vec<&str> = ctx.model.markers.iter().map(|m| m.name.as_str()).collect();
     let renamed = matched.renamed(&names, &header.labels).into_iter().map(|(a, b)| (a.into(), b.into())).collect();
-    let bridged = order.bridged;
-    let gaps = runs.stats(ctx, map, n, bridged);
+    let bridged = job.order.bridged;
+    let gaps = job.runs.stats(ctx, &matched.columns, job.n, bridged);
     Ok(StreamedTrial {
-        name: name.into(),
-        frames: n,
+        name: job.name.into(),
+        frames: job.n,
         bridged,
         unmatched_model: matched.unmatched_model.clone(),
         unmatched_trial: matched.unmatched_trial.clone(),
         renamed,
         gaps,
-        presolved,
+        presolved: std::mem::take(&mut job.presolved),
         wall_seconds: start.elapsed().as_secs_f64(),
         threads,
     })
