@@ -163,6 +163,24 @@ pub fn run(a: BenchArgs) -> anyhow::Result<u8> {
             me * 1e3,
             fps(me)
         );
+        if let Chosen::Wgpu(b) = &chosen {
+            // The same host code on plain memory, no device running beside it (median of the
+            // repetitions).
+            let (mut packs, mut hands) = (Vec::new(), Vec::new());
+            for _ in 0..repeats {
+                let mut sinks: Vec<&mut dyn GnSink> = handoff.iter_mut().map(|h| h as &mut dyn GnSink).collect();
+                let (p, h) =
+                    crate::kinematics::gpu::host_path_alone(&eval, b.precision(), &frames, &proxies, &mut sinks)?;
+                packs.push(p * 1e6 / n as f64);
+                hands.push(h * 1e6 / n as f64);
+            }
+            let (p, h) = (median(&mut packs), median(&mut hands));
+            println!(
+                "#   host path alone (plain memory, no device beside it): CPU time per frame: pack {p:.3} us + \
+                 hand-out {h:.3} us = {:.3} us",
+                p + h
+            );
+        }
         for (what, p) in [("linearize", pl), ("handoff", ph), ("energy", pe)] {
             if let Some(p) = p {
                 let per = |s: f64| s * 1e3 / repeats as f64;

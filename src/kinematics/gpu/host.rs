@@ -186,3 +186,24 @@ pub(super) fn energies<W: Word>(words: &[W], out: &mut [EnergyEval]) {
         };
     }
 }
+
+/// The host path alone, without a device: `frames` packed into plain memory laid out as the
+/// upload buffer, then a plain (zeroed) block per frame laid out as the read-back buffer handed
+/// to `sinks`, exactly as a chunk's are. Returns the CPU time of packing and of the hand-out (s,
+/// summed over threads). On lavapipe the device's threads share the host's cores and inflate
+/// the in-place figures; this is what the host costs when nothing else runs.
+pub(super) fn host_path_alone<W: Word>(
+    job: &PackJob<'_, '_>,
+    sinks: &mut [&mut dyn GnSink],
+    pieces: usize,
+) -> (f64, f64) {
+    let n = job.frames.len();
+    let mut upload = vec![0u64; (n * job.rows.input * std::mem::size_of::<W>()).div_ceil(8)];
+    let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut upload);
+    let mut refs = vec![[0.0; 3]; n];
+    let mut scratch = vec![PackScratch::default(); pieces.max(1)];
+    let pack_s = pack::<W>(job, bytes.into(), &mut refs, &mut scratch);
+    let out = vec![W::of(0.0); n * job.rows.output];
+    let hand_out_s = hand_out::<W>(&out, job.rows, job.np, &refs, sinks, n.div_ceil(pieces.max(1)));
+    (pack_s, hand_out_s)
+}

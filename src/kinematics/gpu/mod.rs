@@ -510,6 +510,29 @@ impl WgpuBackend {
     }
 }
 
+/// CPU time (s, summed over threads) of the host path alone for `frames` at `proxies`, without a
+/// device: packing into plain memory laid out as the upload buffer, and handing a plain block
+/// per frame, laid out as the read-back buffer, to `sinks` — the code a chunk runs, on rayon's
+/// pool in as many pieces. Returns `(pack, hand-out)`. For `smocap bench-batch`: on lavapipe the
+/// device's own threads share the host's cores, which inflates the in-place figures.
+pub fn host_path_alone(
+    eval: &Evaluator<'_>,
+    precision: Precision,
+    frames: &[FrameProblem<'_>],
+    proxies: &[f64],
+    sinks: &mut [&mut dyn GnSink],
+) -> Result<(f64, f64), BackendError> {
+    let (np, nm) = (eval.proxy.np(), eval.model.markers.len());
+    check_shape(frames.len(), proxies.len(), sinks.len(), np)?;
+    let rows = pack::pack(eval.model, eval.proxy, &eval.layout).rows;
+    let job = host::PackJob { rows, np, nm, frames, proxies };
+    let pieces = 2 * rayon::current_num_threads().max(1);
+    Ok(match precision {
+        Precision::F32 => host::host_path_alone::<f32>(&job, sinks, pieces),
+        Precision::F64 => host::host_path_alone::<f64>(&job, sinks, pieces),
+    })
+}
+
 /// Frames per chunk for a call of `n` frames: at most `cap`, and at most `n / pieces` (so that
 /// the call takes `pieces` chunks) unless that is under [`MIN_PIECE`].
 fn piece_len(n: usize, cap: usize, pieces: usize) -> usize {
