@@ -113,6 +113,20 @@ pub fn run(a: BenchArgs) -> anyhow::Result<u8> {
         let mut handoff: Vec<Handoff> = (0..n).map(|_| Handoff::new(np)).collect();
         let mut energies = vec![EnergyEval::default(); n];
         let repeats = a.repeats.max(1);
+        // The same host code on plain memory, before the device runs (its threads share these
+        // cores on lavapipe and linger after a call): median of the repetitions.
+        let mut alone = None;
+        if let Chosen::Wgpu(b) = &chosen {
+            let (mut packs, mut hands) = (Vec::new(), Vec::new());
+            for _ in 0..repeats {
+                let mut sinks: Vec<&mut dyn GnSink> = handoff.iter_mut().map(|h| h as &mut dyn GnSink).collect();
+                let (p, h) =
+                    crate::kinematics::gpu::host_path_alone(&eval, b.precision(), &frames, &proxies, &mut sinks)?;
+                packs.push(p * 1e6 / n as f64);
+                hands.push(h * 1e6 / n as f64);
+            }
+            alone = Some((median(&mut packs), median(&mut hands)));
+        }
         // Each kind of call: a warm-up, then `repeats` timed calls (wgpu: with its phase account).
         let mut timed = |kind: Kind| -> anyhow::Result<(f64, Option<PhaseTimes>)> {
             if kind == Kind::Linearize && out.is_empty() {
@@ -163,20 +177,9 @@ pub fn run(a: BenchArgs) -> anyhow::Result<u8> {
             me * 1e3,
             fps(me)
         );
-        if let Chosen::Wgpu(b) = &chosen {
-            // The same host code on plain memory, no device running beside it (median of the
-            // repetitions).
-            let (mut packs, mut hands) = (Vec::new(), Vec::new());
-            for _ in 0..repeats {
-                let mut sinks: Vec<&mut dyn GnSink> = handoff.iter_mut().map(|h| h as &mut dyn GnSink).collect();
-                let (p, h) =
-                    crate::kinematics::gpu::host_path_alone(&eval, b.precision(), &frames, &proxies, &mut sinks)?;
-                packs.push(p * 1e6 / n as f64);
-                hands.push(h * 1e6 / n as f64);
-            }
-            let (p, h) = (median(&mut packs), median(&mut hands));
+        if let Some((p, h)) = alone {
             println!(
-                "#   host path alone (plain memory, no device beside it): CPU time per frame: pack {p:.3} us + \
+                "#   host path alone (plain memory, before the device runs): CPU time per frame: pack {p:.3} us + \
                  hand-out {h:.3} us = {:.3} us",
                 p + h
             );
