@@ -521,7 +521,7 @@ fn a_missing_trial_file_is_named_once_with_its_error_said_once() {
     assert_eq!(o.status.code(), Some(1));
     let err = stderr(&o);
     // The last `error:` line is smocap's (a Vulkan loader may print its own before it).
-    let line = err.lines().filter(|l| l.starts_with("error:")).next_back().unwrap_or("");
+    let line = err.lines().rfind(|l| l.starts_with("error:")).unwrap_or("");
     assert_eq!(line.matches("No such file or directory").count(), 1, "{err}");
 }
 

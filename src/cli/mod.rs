@@ -56,7 +56,7 @@ pub enum Command {
     /// Write a synthetic trial (TRC) and its truth (JSON) from a model.
     Synth(synth::SynthArgs),
     /// Calibrate a subject and solve its trials jointly for scale and pose.
-    Solve(solve::SolveArgs),
+    Solve(Box<solve::SolveArgs>),
     /// What a marker file holds: frames, rate, units, labels, gaps per label, time span.
     Markers(markers::MarkersArgs),
     /// Batched evaluation throughput (frame-evaluations/s) of the shipped model per batch size.
@@ -90,7 +90,7 @@ pub fn main() -> ExitCode {
     let result = match cli.command {
         Command::Demo(a) => demo::run(a),
         Command::Synth(a) => synth::run(a),
-        Command::Solve(a) => solve::run(a),
+        Command::Solve(a) => solve::run(*a),
         Command::Markers(a) => markers::run(a),
         Command::BenchBatch(a) => bench::run(a),
         Command::Bench(a) => bench_table::run(a),
