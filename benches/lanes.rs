@@ -1,13 +1,15 @@
 //! The lane scheduler against the plain per-segment loop it replaced (CPU backend, whole trial),
-//! and batched evaluation throughput per backend and batch size (wgpu where an adapter exists).
+//! batched evaluation throughput per backend and batch size (wgpu where an adapter exists), and
+//! the wgpu backend's host path alone (packing and hand-out on plain memory, no device needed:
+//! CPU time summed over threads, per call of 2048 frames).
 //!
 //! `cargo bench --bench lanes` — results are recorded in BENCHMARKS.md.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use rayon::prelude::*;
 use smocap::kinematics::assembly::FrameProblem;
-use smocap::kinematics::backend::{BatchBackend, CpuBackend, FrameModel};
-use smocap::kinematics::gpu::{WgpuBackend, DEFAULT_CAP};
+use smocap::kinematics::backend::{BatchBackend, CpuBackend, FrameModel, GnSink, GnView};
+use smocap::kinematics::gpu::{host_path_alone, Precision, WgpuBackend, DEFAULT_CAP};
 use smocap::model::proxy::ProxyKind;
 use smocap::pipeline::{calibrate_subject, solve_trial_with, Context};
 use smocap::solve::{init::cold_start, make_qp, Calibration, FrameSolver, FrameStatus};
@@ -118,6 +120,52 @@ fn lanes(c: &mut Criterion) {
         }
     }
     g.finish();
+
+    // The host path alone: CPU time of packing and hand-out (criterion's time is CPU time here).
+    let mut g = c.benchmark_group("host_path");
+    g.sample_size(20);
+    let n = 2048;
+    let tw = vec![1e-6; ctx.model.ny()];
+    let batch: Vec<FrameProblem<'_>> = (0..n)
+        .map(|i| FrameProblem {
+            observed: &obs[(i % frames) * stride..(i % frames + 1) * stride],
+            marker_weights: &ctx.marker_weights,
+            tracking_ref: &zeros,
+            tracking_weights: &tw,
+        })
+        .collect();
+    let proxies: Vec<f64> = (0..n).flat_map(|i| s.truth.proxies[i % frames].iter().copied()).collect();
+    let mut sinks: Vec<CopySink> = (0..n).map(|_| CopySink { energy: 0.0, g: vec![0.0; np] }).collect();
+    g.throughput(Throughput::Elements(n as u64));
+    for precision in [Precision::F32, Precision::F64] {
+        g.bench_function(BenchmarkId::new("pack_and_hand_out", precision.name()), |b| {
+            b.iter_custom(|iters| {
+                let mut total = 0.0;
+                for _ in 0..iters {
+                    let mut dyns: Vec<&mut dyn GnSink> = sinks.iter_mut().map(|s| s as &mut dyn GnSink).collect();
+                    let (p, h) = pool
+                        .install(|| host_path_alone(&eval, precision, &batch, &proxies, &mut dyns))
+                        .expect("host path");
+                    total += p + h;
+                }
+                std::time::Duration::from_secs_f64(total)
+            })
+        });
+    }
+    g.finish();
+}
+
+/// A solver-like sink: copies E and g (H stays where the backend left it, as the QP reads it).
+struct CopySink {
+    energy: f64,
+    g: Vec<f64>,
+}
+
+impl GnSink for CopySink {
+    fn take(&mut self, view: &GnView<'_>) {
+        self.energy = view.energy;
+        view.g.copy_to(&mut self.g);
+    }
 }
 
 criterion_group!(benches, lanes);
