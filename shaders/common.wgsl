@@ -235,9 +235,15 @@ fn marker_energy(m: u32, f: u32, x: vec3<real>) -> vec3<real> {
     return vec3<real>(0.0, 0.0, 0.0);
 }
 
+// Tracking weight of y entry j in frame f: from the frame's weight set (the sets follow the
+// chunk's input blocks, at CAP · IN_ROWS; frames sharing a weight vector share a set).
+fn tracking_weight(j: u32, f: u32) -> real {
+    return inp[CAP * IN_ROWS + u32(inp[ai(I_TW, f)]) * NY + j];
+}
+
 // Tracking term j's contribution to E.
 fn tracking_energy(j: u32, f: u32) -> real {
-    let w = inp[ai(I_TW + j, f)];
+    let w = tracking_weight(j, f);
     if (w > 0.0) {
         let d = scr[at(S_Y + j, f)] - inp[ai(I_TREF + j, f)];
         return 0.5 * w * d * d;

@@ -124,7 +124,7 @@ fn assemble(f: u32, lid: u32) {
         for (var e = mu[U_GTO + k]; e < mu[U_GTO + k + 1u]; e += 1u) {
             let t = mu[U_GT + e];
             let j = mu[U_TERM + 3u * t];
-            let w = inp[ai(I_TW + j, f)];
+            let w = tracking_weight(j, f);
             if (w > 0.0) {
                 g += w * scr[at(S_DPHI + t, f)] * (scr[at(S_Y + j, f)] - inp[ai(I_TREF + j, f)]);
             }
@@ -143,7 +143,7 @@ fn assemble(f: u32, lid: u32) {
         }
         for (var e = mu[U_HTO + h]; e < mu[U_HTO + h + 1u]; e += 1u) {
             let t = mu[U_HT + 2u * e];
-            let w = inp[ai(I_TW + mu[U_TERM + 3u * t], f)];
+            let w = tracking_weight(mu[U_TERM + 3u * t], f);
             if (w > 0.0) {
                 v += w * scr[at(S_DPHI + t, f)] * scr[at(S_DPHI + mu[U_HT + 2u * e + 1u], f)];
             }

@@ -84,7 +84,7 @@ fn assemble(f: u32) {
     }
     // Tracking term J_Φᵀ W_t J_Φ, J_Φᵀ W_t e_t.
     for (var j = 0u; j < NY; j += 1u) {
-        let w = inp[ai(I_TW + j, f)];
+        let w = tracking_weight(j, f);
         if (w <= 0.0) {
             continue;
         }

@@ -35,14 +35,60 @@ pub(super) struct PackJob<'a, 'f> {
     pub rows: Rows,
     pub np: usize,
     pub nm: usize,
+    /// The buffers' capacity in frames: the tracking-weight sets start at `cap · rows.input`
+    /// words (the shader's `CAP * IN_ROWS`).
+    pub cap: usize,
     pub frames: &'a [FrameProblem<'f>],
     pub proxies: &'a [f64],
+}
+
+/// The tracking-weight sets of a chunk: frames whose `tracking_weights` are the same slice
+/// (one trial's weights, shared by its lanes) share one set of `ny` words, so that a frame's
+/// block carries one index instead of `ny` weights. Kept by the backend between chunks (no
+/// allocation once warm).
+#[derive(Clone, Debug, Default)]
+pub(super) struct WeightSets {
+    /// Each set's slice, as (address, length), met in frame order.
+    index: std::collections::HashMap<(usize, usize), u32>,
+    /// The first frame of each set (its weights are that frame's).
+    first: Vec<usize>,
+    /// Set of each frame of the chunk.
+    of_frame: Vec<u32>,
+    /// One set's words while converting (u64 storage, aligned for both word sizes).
+    words: Vec<u64>,
+}
+
+impl WeightSets {
+    /// Assigns every frame of `frames` its set; returns the number of sets.
+    fn assign(&mut self, frames: &[FrameProblem<'_>]) -> usize {
+        self.index.clear();
+        self.first.clear();
+        self.of_frame.clear();
+        let mut last: Option<((usize, usize), u32)> = None;
+        for (i, fr) in frames.iter().enumerate() {
+            let key = (fr.tracking_weights.as_ptr() as usize, fr.tracking_weights.len());
+            let k = match last {
+                Some((lk, k)) if lk == key => k,
+                _ => {
+                    let next = self.first.len() as u32;
+                    let k = *self.index.entry(key).or_insert(next);
+                    if k == next {
+                        self.first.push(i);
+                    }
+                    k
+                }
+            };
+            last = Some((key, k));
+            self.of_frame.push(k);
+        }
+        self.first.len()
+    }
 }
 
 /// One frame's input block into `w` (length `rows.input`), with `mask` (length nm) as scratch;
 /// returns its reference point: the centroid of the observed and weighted markers, rounded to
 /// f32 (exact in both precisions). Unobserved markers get weight and offset 0.
-fn pack_frame<W: Word>(job: &PackJob<'_, '_>, i: usize, w: &mut [W], mask: &mut [bool]) -> [f64; 3] {
+fn pack_frame<W: Word>(job: &PackJob<'_, '_>, i: usize, set: u32, w: &mut [W], mask: &mut [bool]) -> [f64; 3] {
     let (r, fr, nm, np) = (&job.rows, &job.frames[i], job.nm, job.np);
     let (obs, mw) = (&fr.observed[..3 * nm], &fr.marker_weights[..nm]);
     let (mut sum, mut n) = ([0.0f64; 3], 0usize);
@@ -73,38 +119,59 @@ fn pack_frame<W: Word>(job: &PackJob<'_, '_>, i: usize, w: &mut [W], mask: &mut 
             *m = W::of(0.0);
         }
     }
-    let ny = r.i_tw - r.i_tref;
-    let (wr, wt) = w[r.i_tref..r.i_c].split_at_mut(ny);
-    for (d, v) in [(wr, fr.tracking_ref), (wt, fr.tracking_weights)] {
-        let m = v.len().min(ny);
-        for (o, &x) in d[..m].iter_mut().zip(&v[..m]) {
-            *o = W::of(x);
-        }
-        d[m..].fill(W::of(0.0));
-    }
+    convert_padded(&mut w[r.i_tref..r.i_tw], fr.tracking_ref);
+    w[r.i_tw] = W::of(set as f64);
     for a in 0..3 {
         w[r.i_c + a] = W::of(c[a]);
     }
     c
 }
 
-/// Packs `job` into `dst` (the mapped upload range, `frames · rows.input` words) and the frames'
-/// reference points into `refs`, in `scratch.len()` pieces. Returns the CPU time (s).
+/// `v` converted into `d`, zeros after it (`d` as long as `y`).
+fn convert_padded<W: Word>(d: &mut [W], v: &[f64]) {
+    let m = v.len().min(d.len());
+    for (o, &x) in d[..m].iter_mut().zip(&v[..m]) {
+        *o = W::of(x);
+    }
+    d[m..].fill(W::of(0.0));
+}
+
+/// Packs `job` into `dst` (the mapped upload buffer: the frames' blocks from word 0, their
+/// tracking-weight sets from word `cap · rows.input`) and the frames' reference points into
+/// `refs`, in `scratch.len()` pieces. Returns the CPU time (s) and the number of weight sets.
 pub(super) fn pack<W: Word>(
     job: &PackJob<'_, '_>,
     mut dst: wgpu::WriteOnly<'_, [u8]>,
     refs: &mut [[f64; 3]],
     scratch: &mut [PackScratch],
-) -> f64 {
+    sets: &mut WeightSets,
+) -> (f64, usize) {
     let n = job.frames.len();
     let per = n.div_ceil(scratch.len().max(1)).max(1);
-    let block = job.rows.input * std::mem::size_of::<W>();
-    assert!(dst.len() >= n * block, "the upload range holds the chunk");
+    let word = std::mem::size_of::<W>();
+    let block = job.rows.input * word;
+    let ny = job.rows.ny;
+    // The sets, on this thread: usually one per trial in the chunk.
+    let (k, sets_cpu) = cpu(|| {
+        let k = sets.assign(job.frames);
+        let table = job.cap * block;
+        assert!(n <= job.cap && dst.len() >= table + k * ny * word, "the upload range holds the chunk and its sets");
+        sets.words.resize((ny * word).div_ceil(8).max(1), 0);
+        for (s, &f) in sets.first.iter().enumerate() {
+            let w: &mut [W] = &mut bytemuck::cast_slice_mut::<u64, W>(&mut sets.words)[..ny];
+            convert_padded(w, job.frames[f].tracking_weights);
+            let at = table + s * ny * word;
+            dst.slice(at..at + ny * word).copy_from_slice(bytemuck::cast_slice(w));
+        }
+        k
+    });
     // `WriteOnly<[u8]>` is not `Send`; the pieces write disjoint ranges through its pointer.
     let base = Dst(dst.as_raw_element_ptr());
     let base = &base;
     let refs = &mut refs[..n];
-    refs.par_chunks_mut(per)
+    let of_frame = &sets.of_frame;
+    let pieces: f64 = refs
+        .par_chunks_mut(per)
         .zip(scratch.par_iter_mut())
         .enumerate()
         .map(|(k, (r, s))| {
@@ -115,7 +182,7 @@ pub(super) fn pack<W: Word>(
                 let mask = &mut s.mask[..];
                 for (j, c) in r.iter_mut().enumerate() {
                     let i = k * per + j;
-                    *c = pack_frame(job, i, w, mask);
+                    *c = pack_frame(job, i, of_frame[i], w, mask);
                     let bytes: &[u8] = bytemuck::cast_slice(w);
                     // SAFETY: frame i's block `[i·block, (i+1)·block)` lies inside the mapped range
                     // (asserted above), is written by this piece only, and is never read.
@@ -124,7 +191,8 @@ pub(super) fn pack<W: Word>(
             })
             .1
         })
-        .sum()
+        .sum();
+    (sets_cpu + pieces, k)
 }
 
 /// One packing piece's scratch: a frame's block (u64 storage, aligned for both word sizes) and
@@ -199,13 +267,15 @@ pub(super) fn host_path_alone<W: Word>(
     pieces: usize,
 ) -> (f64, f64) {
     let n = job.frames.len();
-    let mut upload = vec![0u64; (n * job.rows.input * std::mem::size_of::<W>()).div_ceil(8)];
+    let words = job.cap * (job.rows.input + job.rows.ny);
+    let mut upload = vec![0u64; (words * std::mem::size_of::<W>()).div_ceil(8)];
     let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut upload);
     let mut refs = vec![[0.0; 3]; n];
     let mut scratch = vec![PackScratch::default(); pieces.max(1)];
+    let mut sets = WeightSets::default();
     // Once to fault the pages in (the mapped buffers are persistent), then timed.
-    pack::<W>(job, (&mut *bytes).into(), &mut refs, &mut scratch);
-    let pack_s = pack::<W>(job, bytes.into(), &mut refs, &mut scratch);
+    pack::<W>(job, (&mut *bytes).into(), &mut refs, &mut scratch, &mut sets);
+    let (pack_s, _) = pack::<W>(job, bytes.into(), &mut refs, &mut scratch, &mut sets);
     let out = vec![W::of(0.0); n * job.rows.output];
     let per = n.div_ceil(pieces.max(1));
     hand_out::<W>(&out, job.rows, job.np, &refs, sinks, per);

@@ -92,6 +92,8 @@ pub struct WgpuBackend {
     pieces: usize,
     /// Per-piece scratch of one input block while packing.
     pack_scratch: Vec<host::PackScratch>,
+    /// The chunk's tracking-weight sets while packing.
+    weight_sets: host::WeightSets,
     /// Reference point of each frame of the two chunks in flight (f32-representable, in f64).
     refs: [Vec<[f64; 3]>; 2],
     errors: ErrorSlot,
@@ -211,7 +213,9 @@ impl WgpuBackend {
         // Chunk capacity: every per-frame buffer must fit one binding.
         let word = precision.word() as u64;
         let scratch_rows = kernel.scratch_rows(&rows);
-        let widest = word * rows.input.max(scratch_rows).max(rows.output + 4) as u64;
+        // Input: the frames' blocks, then up to one tracking-weight set per frame.
+        let in_rows = rows.input + rows.ny;
+        let widest = word * in_rows.max(scratch_rows).max(rows.output + 4) as u64;
         let bind = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         let by_limits = (bind / widest) as usize;
         let by_groups = kernel.frames_per_dispatch(limits.max_compute_workgroups_per_dimension as usize);
@@ -295,11 +299,11 @@ impl WgpuBackend {
             })
         };
         use wgpu::BufferUsages as U;
-        let input = buffer("input", cap * rows.input, U::STORAGE | U::COPY_DST);
+        let input = buffer("input", cap * in_rows, U::STORAGE | U::COPY_DST);
         let upload = [0, 1].map(|_| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("upload"),
-                size: word * (cap * rows.input) as u64,
+                size: word * (cap * in_rows) as u64,
                 usage: U::MAP_WRITE | U::COPY_SRC,
                 mapped_at_creation: true,
             })
@@ -351,6 +355,7 @@ impl WgpuBackend {
             kernel,
             pieces: DEFAULT_PIECES,
             pack_scratch: vec![host::PackScratch::default(); 2 * rayon::current_num_threads().max(1)],
+            weight_sets: host::WeightSets::default(),
             refs: [vec![[0.0; 3]; cap], vec![[0.0; 3]; cap]],
             errors,
             phases: PhaseTimes::default(),
@@ -396,16 +401,16 @@ impl WgpuBackend {
                 None => return Err(self.fail("the upload buffer was never mapped".into())),
             }
         }
-        let cpu = {
+        let (cpu, sets) = {
             let mut view = self.upload[slot]
-                .slice(..size.get())
+                .slice(..)
                 .get_mapped_range_mut()
                 .map_err(|e| self.fail(format!("writing the inputs: {e:?}")))?;
-            let job = host::PackJob { rows: r, np: self.np, nm: self.nm, frames, proxies };
-            let (refs, scratch) = (&mut self.refs[slot], &mut self.pack_scratch);
+            let job = host::PackJob { rows: r, np: self.np, nm: self.nm, cap: self.cap, frames, proxies };
+            let (refs, scratch, ws) = (&mut self.refs[slot], &mut self.pack_scratch, &mut self.weight_sets);
             match self.precision {
-                Precision::F32 => host::pack::<f32>(&job, view.slice(..), refs, scratch),
-                Precision::F64 => host::pack::<f64>(&job, view.slice(..), refs, scratch),
+                Precision::F32 => host::pack::<f32>(&job, view.slice(..), refs, scratch, ws),
+                Precision::F64 => host::pack::<f64>(&job, view.slice(..), refs, scratch, ws),
             }
         };
         self.upload[slot].unmap();
@@ -416,6 +421,9 @@ impl WgpuBackend {
         self.queue.write_buffer(&self.params, 0, bytemuck::cast_slice(&[n as u32, st as u32, 0, 0]));
         let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("chunk") });
         enc.copy_buffer_to_buffer(&self.upload[slot], 0, &self.input, 0, size.get());
+        // The frames' tracking-weight sets, at `cap · rows.input` words (`CAP * IN_ROWS`).
+        let table = (self.cap * r.input * word) as u64;
+        enc.copy_buffer_to_buffer(&self.upload[slot], table, &self.input, table, (sets * r.ny * word) as u64);
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
             pass.set_pipeline(if linearize { &self.linearize } else { &self.energy });
@@ -525,7 +533,7 @@ pub fn host_path_alone(
     let (np, nm) = (eval.proxy.np(), eval.model.markers.len());
     check_shape(frames.len(), proxies.len(), sinks.len(), np)?;
     let rows = pack::pack(eval.model, eval.proxy, &eval.layout).rows;
-    let job = host::PackJob { rows, np, nm, frames, proxies };
+    let job = host::PackJob { rows, np, nm, cap: frames.len(), frames, proxies };
     let pieces = 2 * rayon::current_num_threads().max(1);
     Ok(match precision {
         Precision::F32 => host::host_path_alone::<f32>(&job, sinks, pieces),

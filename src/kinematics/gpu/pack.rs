@@ -26,8 +26,12 @@ const ITEM_CHILD_OFFSET: u32 = 4;
 #[derive(Clone, Copy, Debug)]
 pub struct Rows {
     /// Input: proxies, observations (relative to the reference point), marker weights (0 where
-    /// unobserved), tracking reference and weights, the reference point.
+    /// unobserved), tracking reference, the index of the frame's tracking-weight set, the
+    /// reference point. The sets (`ny` words each, shared by the frames that share a weight
+    /// vector) follow the chunk's blocks at `CAP · input` words.
     pub input: usize,
+    /// Entries of `y` (words of a tracking-weight set).
+    pub ny: usize,
     /// Scratch of the per-frame kernel (structure of arrays): y, J_Φ, body and motion frames,
     /// one body's A/W and one marker's rows.
     pub scratch: usize,
@@ -354,7 +358,7 @@ pub fn pack(model: &Model, proxy: &ProxyMap, layout: &Layout) -> Packed {
     let i_mw = i_obs + 3 * nm;
     let i_tref = i_mw + nm;
     let i_tw = i_tref + ny;
-    let i_c = i_tw + ny;
+    let i_c = i_tw + 1;
     for (name, v) in [("I_P", i_p), ("I_OBS", i_obs), ("I_MW", i_mw), ("I_TREF", i_tref), ("I_TW", i_tw), ("I_C", i_c)]
     {
         c(name, v);
@@ -368,6 +372,7 @@ pub fn pack(model: &Model, proxy: &ProxyMap, layout: &Layout) -> Packed {
     c("OUT_ROWS", o_x + 3 * nm);
     let rows = Rows {
         input: i_c + 3,
+        ny,
         scratch: scratch.max(1),
         scratch_coop: coop.c_rows.max(1),
         output: o_x + 3 * nm,
