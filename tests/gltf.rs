@@ -7,6 +7,7 @@
 
 mod common;
 
+use common::{convert_archive, converted_synthetic};
 use nalgebra::{Matrix4, Quaternion, Translation3, UnitQuaternion, Vector3};
 use smocap::render::scene::Up;
 use smocap::render::{self, Take};
@@ -18,31 +19,6 @@ fn tmp(name: &str) -> PathBuf {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
-}
-
-/// Converts the datasets of `toml_body` into `dir/out` and returns the trial file `rel` there.
-fn convert(dir: &Path, toml_body: &str, rel: &str) -> PathBuf {
-    std::fs::create_dir_all(dir).unwrap();
-    let toml = dir.join("datasets.toml");
-    std::fs::write(&toml, toml_body).unwrap();
-    let out = dir.join("out");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_smocap"))
-        .args(["convert", toml.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet"])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    out.join(rel)
-}
-
-/// A converted synthetic trial of the shipped model.
-fn synthetic(dir: &Path, frames: usize) -> PathBuf {
-    let spec = smocap::archive::config::SyntheticSpec { subjects: 1, trials: 1, frames, seed: 5 };
-    smocap::archive::synthetic::generate(&spec, &dir.join("data")).unwrap();
-    convert(
-        dir,
-        "[[dataset]]\nname = \"lab\"\nroot = \"data\"\ntrials = [\"*/walk*.trc\"]\nsubject = \"{subject}/{trial}.trc\"\nstatic = \"{subject}/static.trc\"\n",
-        "lab/subj01/walk01.mcap",
-    )
 }
 
 /// A converted shared OpenSim trial (`datasets/<name>` with its model, marker set and setups),
@@ -63,7 +39,7 @@ fn shared_trial(dir: &Path, name: &str, files: [&str; 6]) -> Option<PathBuf> {
         d(scale),
         d(ik)
     );
-    Some(convert(dir, &toml, &format!("d/{}", trial.replace(".trc", ".mcap"))))
+    Some(convert_archive(dir, &toml, &format!("d/{}", trial.replace(".trc", ".mcap"))))
 }
 
 /// World transforms (4×4, f64) of every node at animation key `key`, and the nodes' names.
@@ -157,7 +133,7 @@ fn check(file: &Path, what: &str) {
 #[test]
 fn gltf_node_world_transforms_reproduce_forward_kinematics_of_the_shipped_model() {
     let dir = tmp("shipped");
-    check(&synthetic(&dir, 60), "shipped model");
+    check(&converted_synthetic(&dir, 60), "shipped model");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -192,7 +168,7 @@ fn gltf_node_world_transforms_reproduce_forward_kinematics_of_the_shared_trials(
 #[test]
 fn gltf_export_names_bodies_markers_and_cameras_and_is_byte_identical_across_runs() {
     let dir = tmp("names");
-    let file = synthetic(&dir, 30);
+    let file = converted_synthetic(&dir, 30);
     let out = |n: &str| dir.join(n).to_str().unwrap().to_string();
     for name in ["a.glb", "b.glb"] {
         let o = std::process::Command::new(env!("CARGO_BIN_EXE_smocap"))
@@ -250,7 +226,7 @@ fn solve_writes_one_glb_per_trial_into_its_gltf_dir() {
 #[test]
 fn gltf_cameras_sit_at_the_rigs_centres_looking_along_their_optical_axes() {
     let dir = tmp("cams");
-    let file = synthetic(&dir, 20);
+    let file = converted_synthetic(&dir, 20);
     let rec = smocap::archive::export::read_trial_record(&file).unwrap();
     let take = Take::from_record(&rec, &file).unwrap();
     let cams = render::cameras(&take, None, 7).unwrap();

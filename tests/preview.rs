@@ -2,6 +2,9 @@
 //! with one panel (row of tiles) per camera, each showing the projected skeleton; the bytes are
 //! the same on every run.
 
+mod common;
+
+use common::converted_synthetic;
 use smocap::render::preview::{SheetLayout, SHEET_RGB, TILE_RGB};
 use std::path::{Path, PathBuf};
 
@@ -14,21 +17,6 @@ fn tmp(name: &str) -> PathBuf {
 
 fn smocap(args: &[&str]) -> std::process::Output {
     std::process::Command::new(env!("CARGO_BIN_EXE_smocap")).args(args).output().unwrap()
-}
-
-fn synthetic(dir: &Path, frames: usize) -> PathBuf {
-    let spec = smocap::archive::config::SyntheticSpec { subjects: 1, trials: 1, frames, seed: 5 };
-    smocap::archive::synthetic::generate(&spec, &dir.join("data")).unwrap();
-    let toml = dir.join("datasets.toml");
-    std::fs::write(
-        &toml,
-        "[[dataset]]\nname = \"lab\"\nroot = \"data\"\ntrials = [\"*/walk*.trc\"]\nsubject = \"{subject}/{trial}.trc\"\nstatic = \"{subject}/static.trc\"\n",
-    )
-    .unwrap();
-    let out = dir.join("out");
-    let o = smocap(&["convert", toml.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet"]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    out.join("lab/subj01/walk01.mcap")
 }
 
 /// Decodes an 8-bit RGB PNG: (width, height, pixels).
@@ -45,7 +33,7 @@ fn decode(path: &Path) -> (u32, u32, Vec<u8>) {
 #[test]
 fn the_preview_of_a_converted_trial_decodes_with_one_panel_per_camera_showing_the_skeleton() {
     let dir = tmp("sheet");
-    let file = synthetic(&dir, 40);
+    let file = converted_synthetic(&dir, 40);
     // Three cameras: the panels follow the rig.
     let rig = dir.join("rig.toml");
     let mut text = String::new();

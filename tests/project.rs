@@ -6,11 +6,12 @@
 
 mod common;
 
+use common::{convert_archive, converted_synthetic};
 use nalgebra::Vector3;
 use serde_json::Value;
 use smocap::render::rig::{self, default_rig, parse_rig, SubjectFrame};
 use smocap::render::Take;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 fn tmp(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("smocap-project-{}-{name}", std::process::id()));
@@ -21,27 +22,6 @@ fn tmp(name: &str) -> PathBuf {
 
 fn smocap(args: &[&str]) -> std::process::Output {
     std::process::Command::new(env!("CARGO_BIN_EXE_smocap")).args(args).output().unwrap()
-}
-
-/// Converts `toml_body`'s datasets into `dir/out`; the trial `rel` there.
-fn convert(dir: &Path, toml_body: &str, rel: &str) -> PathBuf {
-    std::fs::create_dir_all(dir).unwrap();
-    let toml = dir.join("datasets.toml");
-    std::fs::write(&toml, toml_body).unwrap();
-    let out = dir.join("out");
-    let o = smocap(&["convert", toml.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet"]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    out.join(rel)
-}
-
-fn synthetic(dir: &Path, frames: usize) -> PathBuf {
-    let spec = smocap::archive::config::SyntheticSpec { subjects: 1, trials: 1, frames, seed: 5 };
-    smocap::archive::synthetic::generate(&spec, &dir.join("data")).unwrap();
-    convert(
-        dir,
-        "[[dataset]]\nname = \"lab\"\nroot = \"data\"\ntrials = [\"*/walk*.trc\"]\nsubject = \"{subject}/{trial}.trc\"\nstatic = \"{subject}/static.trc\"\n",
-        "lab/subj01/walk01.mcap",
-    )
 }
 
 fn walking_frame() -> SubjectFrame {
@@ -106,7 +86,7 @@ fn a_point_straight_ahead_of_a_camera_lands_at_the_principal_point() {
 #[test]
 fn project_puts_a_marker_straight_ahead_of_a_camera_at_its_principal_point_in_the_coco_file() {
     let dir = tmp("ahead");
-    let file = synthetic(&dir, 20);
+    let file = converted_synthetic(&dir, 20);
     let rec = smocap::archive::export::read_trial_record(&file).unwrap();
     let take = Take::from_record(&rec, &file).unwrap();
     let mut ws = smocap::kinematics::Workspace::new(&take.model);
@@ -198,7 +178,7 @@ fn project_writes_coco_json_csv_cameras_and_metrics_for_a_converted_shared_trial
         d("subject01_Setup_Scale.xml"),
         d("subject01_Setup_IK.xml")
     );
-    let file = convert(&dir, &toml, "g/subject01_walk1.mcap");
+    let file = convert_archive(&dir, &toml, "g/subject01_walk1.mcap");
     let out = dir.join("gt");
     let o = smocap(&["project", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--stride", "10"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));

@@ -153,3 +153,28 @@ pub fn scale_set(path: &std::path::Path) -> Vec<(String, [f64; 3])> {
         })
         .collect()
 }
+
+/// A `datasets.toml` for archives written by `smocap::archive::synthetic::generate` under `data`.
+pub const SYNTHETIC_DATASETS: &str = "[[dataset]]\nname = \"lab\"\nroot = \"data\"\ntrials = [\"*/walk*.trc\"]\nsubject = \"{subject}/{trial}.trc\"\nstatic = \"{subject}/static.trc\"\n";
+
+/// Converts `toml_body`'s datasets (written to `dir/datasets.toml`) into `dir/out` with the
+/// built binary; the converted trial `rel` there.
+pub fn convert_archive(dir: &std::path::Path, toml_body: &str, rel: &str) -> std::path::PathBuf {
+    std::fs::create_dir_all(dir).unwrap();
+    let toml = dir.join("datasets.toml");
+    std::fs::write(&toml, toml_body).unwrap();
+    let out = dir.join("out");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_smocap"))
+        .args(["convert", toml.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    out.join(rel)
+}
+
+/// One synthetic trial of the shipped model (`frames` frames, seed 5), converted.
+pub fn converted_synthetic(dir: &std::path::Path, frames: usize) -> std::path::PathBuf {
+    let spec = smocap::archive::config::SyntheticSpec { subjects: 1, trials: 1, frames, seed: 5 };
+    smocap::archive::synthetic::generate(&spec, &dir.join("data")).unwrap();
+    convert_archive(dir, SYNTHETIC_DATASETS, "lab/subj01/walk01.mcap")
+}

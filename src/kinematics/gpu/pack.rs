@@ -311,8 +311,17 @@ pub fn pack(model: &Model, proxy: &ProxyMap, layout: &Layout) -> Packed {
     mu.extend(&oitems);
     c("F_ITEM", mf.len());
     mf.extend(&coefs);
+    // Per-frame scratch rows shared by both kernels: y, J_Φ, body and motion frames.
+    let s_dphi = ny;
+    let s_rot = s_dphi + nt;
+    let s_pos = s_rot + 9 * nb;
+    let s_max = s_pos + 3 * nb;
+    let s_mor = s_max + 3 * nmot;
+    let s_mval = s_mor + 3 * nmot;
+    let s_mder = s_mval + nmot;
+    let s_msig = s_mder + nmot;
+    let s_aw = s_msig + nmot;
     // The cooperative kernel's tables; its scratch block shares the sections before S_AW.
-    let s_aw = ny + nt + 12 * nb + 9 * nmot;
     let coop = gather::gather(model, proxy, &layout_bodies, s_aw);
     for (name, section) in &coop.sections {
         c(name, mu.len());
@@ -327,16 +336,7 @@ pub fn pack(model: &Model, proxy: &ProxyMap, layout: &Layout) -> Packed {
     mu.resize(mu.len().max(4), 0);
     mf.resize(mf.len().max(4), 0.0);
 
-    // Per-frame rows.
-    let s_dphi = ny;
-    let s_rot = s_dphi + nt;
-    let s_pos = s_rot + 9 * nb;
-    let s_max = s_pos + 3 * nb;
-    let s_mor = s_max + 3 * nmot;
-    let s_mval = s_mor + 3 * nmot;
-    let s_mder = s_mval + nmot;
-    let s_msig = s_mder + nmot;
-    debug_assert_eq!(s_aw, s_msig + nmot);
+    // The per-frame kernel's rows after them: one body's A/W and one marker's rows.
     let s_row = s_aw + 6 * ns_max;
     let scratch = s_row + 3 * ns_max;
     for (name, v) in [
