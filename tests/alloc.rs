@@ -16,6 +16,24 @@ thread_local! {
     static COUNTED: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
+/// Counts this thread's allocations while it lives: dropped before the test releases `SERIAL`,
+/// so that what the harness allocates on this thread after the test returns is never counted
+/// into the next test's window.
+struct Counted;
+
+impl Counted {
+    fn on() -> Counted {
+        COUNTED.with(|c| c.set(true));
+        Counted
+    }
+}
+
+impl Drop for Counted {
+    fn drop(&mut self) {
+        COUNTED.with(|c| c.set(false));
+    }
+}
+
 fn count() {
     if COUNTED.with(|c| c.get()) {
         ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
@@ -45,7 +63,7 @@ static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
 #[test]
 fn solving_frames_allocates_nothing_once_warm() {
     let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    COUNTED.with(|c| c.set(true));
+    let _counted = Counted::on();
     let ctx = Context::shipped().unwrap();
     let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 40, seed: 2, ..SynthOptions::default() });
     let eval = ctx.evaluator();
@@ -78,7 +96,7 @@ fn a_step_from_a_handed_over_packed_model_allocates_nothing_once_warm() {
     use smocap::kinematics::backend::{upper_index, GnView, HessianView, Reals};
     use smocap::solve::trqp::Next;
     let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    COUNTED.with(|c| c.set(true));
+    let _counted = Counted::on();
     let ctx = Context::shipped().unwrap();
     let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 20, seed: 3, ..SynthOptions::default() });
     let eval = ctx.evaluator();
@@ -133,7 +151,7 @@ fn a_step_from_a_handed_over_packed_model_allocates_nothing_once_warm() {
 #[test]
 fn writing_frames_allocates_far_less_than_once_per_frame() {
     let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    COUNTED.with(|c| c.set(true));
+    let _counted = Counted::on();
     use smocap::archive::mcap_out::{TrialNames, TrialWriter, WriterOptions};
     use smocap::pipeline::SolvedFrame;
     use smocap::solve::{Calibration, FrameStats, FrameStatus};
