@@ -9,6 +9,7 @@
 mod audit;
 mod bench;
 mod bench_table;
+mod compare;
 mod convert;
 mod demo;
 mod eval_presolve;
@@ -77,6 +78,8 @@ pub enum Command {
     Project(project::ProjectArgs),
     /// A contact sheet (PNG) of a converted trial's projected skeleton and markers, one panel per camera.
     Preview(preview::PreviewArgs),
+    /// Joint angles of a solved trial (`.mot`, `.mcap`) against a reference motion (OpenSim/AddBiomechanics `.mot`, Plug-in Gait angles in a C3D): RMSE, offset, waveform, correlation per coordinate.
+    Compare(compare::CompareArgs),
     /// Spine ablation on the shipped model: poly vs nopoly vs classical on a synthetic yoga-like trial.
     EvalSpine(eval_spine::EvalSpineArgs),
     /// Pre-solve on the hard synthetic set: outlier rate and overhead with never/auto/always.
@@ -92,6 +95,7 @@ pub fn main() -> ExitCode {
         Command::Synth(a) => synth::run(a),
         Command::Solve(a) => solve::run(*a),
         Command::Markers(a) => markers::run(a),
+        Command::Compare(a) => compare::run(a),
         Command::BenchBatch(a) => bench::run(a),
         Command::Bench(a) => bench_table::run(a),
         Command::Audit(a) => audit::run(a),
