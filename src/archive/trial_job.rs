@@ -142,6 +142,8 @@ struct Collect {
     tx: Option<std::sync::mpsc::SyncSender<Vec<SolvedFrame>>>,
     batch: Vec<SolvedFrame>,
     judge: Judge,
+    /// Joint angles against what a person does (flips make the trial suspect).
+    pose: crate::pipeline::plausibility::PoseCheck,
     ms: Vec<f64>,
     it: Vec<f64>,
     rmse: Vec<f64>,
@@ -151,6 +153,7 @@ struct Collect {
 impl Collect {
     fn take(&mut self, f: SolvedFrame) -> Result<(), SinkError> {
         self.judge.frame(f.index, &f.proxies, &f.stats, f.bridged);
+        self.pose.frame(f.index, &f.proxies, !f.bridged && f.stats.status != crate::solve::FrameStatus::TooFewMarkers);
         if self.judge.nonfinite().is_some() {
             return Err("the solver's result is not finite".into());
         }
@@ -195,6 +198,7 @@ pub fn solve_and_write_all(
                         tx: Some(tx),
                         batch: Vec::with_capacity(BATCH_FRAMES),
                         judge: Judge::default(),
+                        pose: crate::pipeline::plausibility::PoseCheck::new(ctx),
                         ms: Vec::with_capacity(n),
                         it: Vec::with_capacity(n),
                         rmse: Vec::with_capacity(n),
@@ -283,7 +287,12 @@ fn finish_trial(
     };
     solved?;
     let mut run = job.run.clone();
-    let verdict = c.judge.verdict();
+    let verdict = match (c.judge.verdict(), c.pose.finish().suspect) {
+        (v, pose) if pose.is_empty() => v,
+        (Verdict::Ok, pose) => Verdict::Suspect(pose.join("; ")),
+        (Verdict::Suspect(why), pose) => Verdict::Suspect(format!("{why}; {}", pose.join("; "))),
+        (failed, _) => failed,
+    };
     match &verdict {
         // Dropping the writer removes its temporary file.
         Verdict::Failed(why) => return Err(why.clone()),

@@ -2,7 +2,7 @@
 //! ([`crate::eval::compare`]).
 
 use crate::eval::compare::figure::write_figure;
-use crate::eval::compare::load::{load_motion, AngleMap};
+use crate::eval::compare::load::{load_motion, AngleMap, SHIPPED_MAPS};
 use crate::eval::compare::{compare, CompareOptions, Comparison, Quantity};
 use anyhow::Context as _;
 use clap::Args;
@@ -30,10 +30,11 @@ pub struct CompareArgs {
     /// The reference: an OpenSim/AddBiomechanics motion (`.mot`/`.sto`) or a C3D file with angle
     /// points (Plug-in Gait's `LKneeAngles`, …, read through `--map`).
     pub reference: PathBuf,
-    /// Which C3D angle points give which coordinates (TOML; default: the shipped Plug-in Gait map,
-    /// `models/compare/plugingait.toml`, which documents the format).
+    /// Which C3D angle points give which coordinates: a shipped map (`plugingait`, the default, for
+    /// the shipped model; `plugingait-opensim` for OpenSim's Rajagopal family, whose pelvis tilt has
+    /// the other sign) or a TOML file (the format of `models/compare/plugingait.toml`).
     #[arg(long)]
-    pub map: Option<PathBuf>,
+    pub map: Option<String>,
     /// Compare only these coordinates (comma-separated).
     #[arg(long, value_delimiter = ',', conflicts_with = "core")]
     pub coordinates: Vec<String>,
@@ -62,11 +63,17 @@ pub struct CompareArgs {
 }
 
 pub fn run(a: CompareArgs) -> anyhow::Result<u8> {
-    let map = match &a.map {
-        Some(p) => {
-            let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
-            Some(AngleMap::parse(&text, &p.display().to_string())?)
-        }
+    let map = match a.map.as_deref() {
+        Some(name) => match AngleMap::shipped(name) {
+            Some(m) => Some(m),
+            None => {
+                let text = std::fs::read_to_string(name).with_context(|| {
+                    let shipped: Vec<&str> = SHIPPED_MAPS.iter().map(|(n, _)| *n).collect();
+                    format!("reading the angle map {name} (not a file, nor a shipped map: {})", shipped.join(", "))
+                })?;
+                Some(AngleMap::parse(&text, name)?)
+            }
+        },
         None => None,
     };
     let ours = load_motion(&a.ours, map.as_ref())?;

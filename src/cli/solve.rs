@@ -257,6 +257,7 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
                 tr.input = Some(conv.clone());
                 // Suspect: the trial's frames (mostly at the iteration cap) or its subject's calibration.
                 let mut why: Vec<String> = verdict.reason().into_iter().collect();
+                why.extend(tr.plausibility.iter().flat_map(|p| p.suspect.iter().cloned()));
                 if !suspect.is_empty() {
                     why.push(format!("suspect calibration: {}", suspect.join("; ")));
                 }

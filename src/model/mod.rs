@@ -18,6 +18,7 @@ pub mod anthropometry;
 pub mod function;
 pub mod profile;
 pub mod proxy;
+pub mod roles;
 
 pub use function::{CubicSpline, Function};
 
@@ -120,13 +121,43 @@ pub enum MarkerClass {
     Tracking,
 }
 
-/// Each marker's registration class: the profile's lists (`tracking`, `anatomical`) first, then
-/// the model file's flag; a marker the file does not flag is anatomical, except that when the
-/// file flags none of its markers, names ending in a digit that share their prefix (of three
-/// characters or more, so that vertebrae such as `T10`, `T12` are not one) with another such name
-/// (`r_thigh1` … `r_thigh5`) form a cluster of tracking markers.
+/// Why a marker has its registration class (for the report).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "from", content = "what")]
+pub enum ClassSource {
+    /// The profile's `[markers] anatomical` / `tracking` lists.
+    Profile,
+    /// The role table (`models/markers/roles.toml`): what the marker is on.
+    Role(String),
+    /// The model file's `<fixed>` flag, in a marker set that sets both values.
+    Flag,
+    /// A numbered name sharing its stem with another (`r_thigh1` … `r_thigh5`): a cluster.
+    NumberedCluster,
+    /// Nothing says otherwise: taken as a landmark.
+    Default,
+}
+
+/// Each marker's registration class ([`marker_classes_with_sources`]).
 pub fn marker_classes(model: &Model, tracking: &[String], anatomical: &[String]) -> Vec<MarkerClass> {
-    let none_flagged = model.markers.iter().all(|m| m.class.is_none());
+    marker_classes_with_sources(model, tracking, anatomical).into_iter().map(|(c, _)| c).collect()
+}
+
+/// Each marker's registration class and why: the profile's lists (`tracking`, `anatomical`)
+/// first; then the shipped role table ([`roles`]: landmarks anatomical; wands, clusters and
+/// computed joint centres tracking); then the model file's flag (OpenSim `<fixed>true</fixed>`
+/// anatomical, `false` tracking) where the marker set sets both values — `<fixed>false</fixed>`
+/// on every marker is OpenSim's default, not a statement that they are clusters; then numbered
+/// names that share their stem (of three characters or more, so that vertebrae such as `T10`,
+/// `T12` are not one) with another such name (`r_thigh1` … `r_thigh5`) are a cluster; the rest are
+/// anatomical.
+pub fn marker_classes_with_sources(
+    model: &Model,
+    tracking: &[String],
+    anatomical: &[String],
+) -> Vec<(MarkerClass, ClassSource)> {
+    let table = roles::RoleTable::shipped();
+    let flags_deliberate = model.markers.iter().any(|m| m.class == Some(MarkerClass::Anatomical))
+        && model.markers.iter().any(|m| m.class == Some(MarkerClass::Tracking));
     let stem = |n: &str| n.trim_end_matches(|c: char| c.is_ascii_digit()).to_string();
     let numbered: Vec<Option<String>> = model
         .markers
@@ -139,22 +170,24 @@ pub fn marker_classes(model: &Model, tracking: &[String], anatomical: &[String])
         .enumerate()
         .map(|(i, m)| {
             if tracking.contains(&m.name) {
-                return MarkerClass::Tracking;
+                return (MarkerClass::Tracking, ClassSource::Profile);
             }
             if anatomical.contains(&m.name) {
-                return MarkerClass::Anatomical;
+                return (MarkerClass::Anatomical, ClassSource::Profile);
             }
-            if let Some(c) = m.class {
-                return c;
+            if let Some((role, what)) = table.role_of(&m.name) {
+                return (role.class(), ClassSource::Role(what.to_string()));
             }
-            let cluster = none_flagged
-                && numbered[i]
-                    .as_ref()
-                    .is_some_and(|s| numbered.iter().enumerate().any(|(j, t)| j != i && t.as_ref() == Some(s)));
+            if let (true, Some(c)) = (flags_deliberate, m.class) {
+                return (c, ClassSource::Flag);
+            }
+            let cluster = numbered[i]
+                .as_ref()
+                .is_some_and(|s| numbered.iter().enumerate().any(|(j, t)| j != i && t.as_ref() == Some(s)));
             if cluster {
-                MarkerClass::Tracking
+                (MarkerClass::Tracking, ClassSource::NumberedCluster)
             } else {
-                MarkerClass::Anatomical
+                (MarkerClass::Anatomical, ClassSource::Default)
             }
         })
         .collect()

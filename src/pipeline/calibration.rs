@@ -23,7 +23,7 @@ use crate::model::MarkerClass;
 use crate::solve::calibrate::{finish, initial_state_weighted, JointProblem, Tracker};
 use crate::solve::placement::place_markers;
 use crate::solve::prior::{
-    measure, Anisotropy, Anthropometric, GlobalTerm, OffsetPrior, PriorReport, ScaleReport, ScaleToward,
+    measure, Anisotropy, Anthropometric, GlobalTerm, LandmarkAnchor, OffsetPrior, PriorReport, ScaleReport, ScaleToward, StaticPosture,
 };
 use crate::solve::{make_qp, Calibration, FrameSolver};
 use nalgebra::{DVector, Vector3};
@@ -230,6 +230,18 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     let first_motion = first(all_w(Kind::Motion));
     let first_w = |k: Kind| if k == Kind::Static { &first_static } else { &first_motion };
     let (coord_ref, coord_w) = ctx.coordinate_tracking();
+    // Static frames: the coordinate targets plus the known standing posture.
+    let posture = StaticPosture::neutral(
+        &ctx.model,
+        settings.static_posture_sd_deg.to_radians(),
+        settings.prior_noise_sd_m,
+        &ctx.static_posture_values,
+    );
+    let (static_ref, static_w) = posture.fold(&coord_ref, &coord_w);
+    let tracking_of = |k: Kind| match k {
+        Kind::Static => (static_ref.as_slice(), static_w.as_slice()),
+        Kind::Motion => (coord_ref.as_slice(), coord_w.as_slice()),
+    };
     let mut solver = FrameSolver::new(&eval, settings.clone(), make_qp(settings.qp));
     let np = ctx.proxy.np();
     let scale: Vec<usize> = (0..np).filter(|&k| ctx.proxy.proxies[k].kind == ProxyKind::Scale).collect();
@@ -278,8 +290,8 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
         // from a pose continuous with the motion (a cold start far into a motion can land in a
         // wrong local minimum).
         let begin = (0..=last).find(|&f| counts[f] >= settings.min_markers).unwrap_or(0);
-        let template =
-            FrameProblem { observed: &[], marker_weights: w1, tracking_ref: &coord_ref, tracking_weights: &coord_w };
+        let (tracking_ref, tracking_weights) = tracking_of(kind);
+        let template = FrameProblem { observed: &[], marker_weights: w1, tracking_ref, tracking_weights };
         let mut tracker = Tracker::new(&mut solver, &p0);
         let mut next = chosen.iter().copied().peekable();
         let mut a = begin;
@@ -319,14 +331,16 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     // Stage 1: scales and poses on the first-stage markers.
     let mut state = initial_state_weighted(&mut solver, &slices, &w_first, &template, &p0, &starts);
     let terms = pri.all();
+    let refs: Vec<&[f64]> = kinds.iter().map(|&k| tracking_of(k).0).collect();
+    let tracking_w: Vec<&[f64]> = kinds.iter().map(|&k| tracking_of(k).1).collect();
     let stage1 = JointProblem {
         model: &ctx.model,
         proxy: &ctx.proxy,
         settings,
         frames: &slices,
         weights: &w_first,
-        tracking_ref: &coord_ref,
-        tracking_weights: &coord_w,
+        tracking_refs: &refs,
+        tracking_weights: &tracking_w,
         registered: &none,
         reference: &generic,
         bound_m: 0.0,
@@ -338,9 +352,8 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     // (stage 1's RMSE, within [0.5, 30] mm: half a millimetre is about what optical motion
     // capture resolves) rather than a fixed one: clean data (a static trial, noise of a
     // millimetre) outweigh the survey, noisy motion data lean on it more.
-    let noise = out.rmse_m.clamp(0.0005, 0.03);
-    let pri =
-        priors(ctx, &scale, if out.rmse_m.is_finite() { noise } else { settings.prior_noise_sd_m }, slices.len())?;
+    let noise = if out.rmse_m.is_finite() { out.rmse_m.clamp(0.0005, 0.03) } else { settings.prior_noise_sd_m };
+    let pri = priors(ctx, &scale, noise, slices.len())?;
     let terms = pri.all();
     let stage1 = JointProblem { terms: &terms, ..stage1 };
     if !registering {
@@ -356,6 +369,12 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     };
     let place_frames: Vec<&[f64]> = place_on.iter().map(|&i| slices[i]).collect();
     let place_poses: Vec<Vec<f64>> = place_on.iter().map(|&i| state.poses[i].clone()).collect();
+    // Markers some calibration frame observes with a weight: those registration can move.
+    let seen: Vec<bool> = (0..nm)
+        .map(|m| {
+            slices.iter().zip(&w_all).any(|(f, w)| w[m] > 0.0 && f[3 * m..3 * m + 3].iter().all(|v| !v.is_nan()))
+        })
+        .collect();
     if registering {
         // Stage 2: tracking markers start where the stage-1 poses saw them.
         let tracking: Vec<bool> = classes.iter().map(|c| *c == MarkerClass::Tracking).collect();
@@ -366,18 +385,11 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
                 state.offsets[m] = p.zip_map(&generic[m], |v, g| v.clamp(g - b, g + b));
             }
         }
-        let noise2 = settings.prior_noise_sd_m.powi(2);
-        let weight: Vec<f64> = classes
-            .iter()
-            .map(|c| match c {
-                MarkerClass::Anatomical => noise2 / settings.registration_anatomical_sd_m.powi(2),
-                MarkerClass::Tracking => noise2 / settings.registration_tracking_sd_m.powi(2),
-            })
-            .collect();
-        let offset_prior = OffsetPrior { reference: generic.clone(), weight };
+        let (offset_prior, anchor) = registration_priors(ctx, &classes, &generic, settings.prior_noise_sd_m, slices.len(), &seen);
         let mut all_terms = terms.clone();
         all_terms.push(&offset_prior);
-        let reg: Vec<bool> = (0..nm).map(|m| w_all.iter().any(|w| w[m] > 0.0)).collect();
+        all_terms.push(&anchor);
+        let reg = seen.clone();
         let stage2 = JointProblem { weights: &w_all, registered: &reg, bound_m: b, terms: &all_terms, ..stage1 };
         out = stage2.solve(&mut state);
         iterations += out.iterations;
@@ -389,7 +401,10 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
         offsets = Some(placed.iter().zip(&ctx.model.markers).map(|(p, m)| p.unwrap_or(m.offset)).collect());
     }
     out.iterations = iterations;
-    let cal = finish(state, out, &p0, &ctx.proxy, offsets, registered, started);
+    let mut cal = finish(state, out, &p0, &ctx.proxy, offsets, registered, started);
+    cal.static_frames = kinds.iter().filter(|k| **k == Kind::Static).count();
+    cal.posture = super::plausibility::static_posture(ctx, &cal.frame_proxies[..cal.static_frames]);
+    cal.registration_report = registration_report(ctx, &cal);
     let report = prior_report(ctx, &pri, &scale, &cal);
     if let Some(h) = report.stature_m.filter(|h| !(0.5..=2.6).contains(h)) {
         let trial = statics.iter().chain(motions).map(|(n, _)| *n).collect::<Vec<_>>().join(", ");
@@ -441,6 +456,85 @@ fn prior_report(ctx: &Context, pri: &Priors, scale: &[usize], cal: &Calibration)
         scales,
         dimensions,
     }
+}
+
+/// Each registered (or placed) marker's move at the subject's scale, the landmarks beyond
+/// `registration_suspect_mm` (suspect) and beyond half of it (warnings).
+fn registration_report(ctx: &Context, cal: &Calibration) -> crate::solve::prior::RegistrationReport {
+    use crate::solve::prior::{MarkerMove, RegistrationReport};
+    let Some(offsets) = &cal.marker_offsets else { return RegistrationReport::default() };
+    let y = ctx.proxy.state(&cal.proxies);
+    let model = &ctx.model;
+    let classes = crate::model::marker_classes_with_sources(
+        model,
+        &ctx.profile.markers.tracking,
+        &ctx.profile.markers.anatomical,
+    );
+    let mut moves: Vec<MarkerMove> = model
+        .markers
+        .iter()
+        .zip(offsets)
+        .zip(classes)
+        .filter(|((m, o), _)| (*o - m.offset).norm() > 0.0)
+        .map(|((m, o), (class, class_from))| {
+            let s = Vector3::from_fn(|a, _| y[model.scale_index(m.body, a)]);
+            MarkerMove { marker: m.name.clone(), class, class_from, moved_mm: (o - m.offset).component_mul(&s).norm() * 1e3 }
+        })
+        .collect();
+    moves.sort_by(|a, b| b.moved_mm.total_cmp(&a.moved_mm));
+    let limit = ctx.settings.registration_suspect_mm;
+    let landmarks = moves.iter().filter(|m| m.class == MarkerClass::Anatomical);
+    let far = |k: f64| -> Vec<String> {
+        landmarks
+            .clone()
+            .filter(|m| m.moved_mm > k * limit)
+            .map(|m| format!("landmark {} moved {:.1} mm from the model's position", m.marker, m.moved_mm))
+            .collect()
+    };
+    let suspect = far(1.0);
+    let warnings = far(0.5).into_iter().filter(|w| !suspect.contains(w)).collect();
+    RegistrationReport { moves, warnings, suspect }
+}
+
+/// The registration's priors on the markers' offsets about the model's (`generic`), for `frames`
+/// calibration frames whose marker RMSE is about `noise_m`:
+/// - each landmark (anatomical marker) costs what `prior_fraction · frames` frames with one
+///   marker missed by `noise_m` cost at one standard deviation `registration_anatomical_sd_m`, as
+///   the scale priors do, so that landmarks stay within millimetres however many frames
+///   calibration uses (a prior of one frame's weight washes out: 96 frames moved knee and ASIS
+///   markers by 20–40 mm, bending the joints to buy marker fit);
+/// - each tracking marker (wand, cluster, computed point) is nearly free (one frame at
+///   `registration_tracking_sd_m`);
+/// - on a body whose observed markers are all tracking ones, their common rotation is held as
+///   landmarks' would be ([`LandmarkAnchor`]): nothing else would fix the body's orientation.
+fn registration_priors(
+    ctx: &Context,
+    classes: &[MarkerClass],
+    generic: &[Vector3<f64>],
+    noise_m: f64,
+    frames: usize,
+    seen: &[bool],
+) -> (OffsetPrior, LandmarkAnchor) {
+    let s = &ctx.settings;
+    let noise2 = noise_m.powi(2);
+    let anatomical = s.prior_fraction * frames as f64 * noise2 / s.registration_anatomical_sd_m.powi(2);
+    let tracking = noise2 / s.registration_tracking_sd_m.powi(2);
+    let weight = classes
+        .iter()
+        .map(|c| Vector3::repeat(if *c == MarkerClass::Anatomical { anatomical } else { tracking }))
+        .collect();
+    let model = &ctx.model;
+    let free_body: Vec<bool> = (0..model.bodies.len())
+        .map(|b| {
+            let on: Vec<usize> = (0..model.markers.len()).filter(|&m| seen[m] && model.markers[m].body == b).collect();
+            on.len() >= 2 && on.iter().all(|&m| classes[m] == MarkerClass::Tracking)
+        })
+        .collect();
+    let anchored: Vec<bool> = (0..model.markers.len()).map(|m| seen[m] && free_body[model.markers[m].body]).collect();
+    (
+        OffsetPrior { reference: generic.to_vec(), weight },
+        LandmarkAnchor::new(model, generic, &anchored, anatomical),
+    )
 }
 
 /// Fails a trial whose marker cloud is far larger or smaller than the model's: the data's

@@ -45,6 +45,9 @@ pub struct Context {
     /// `½·w_j·(q_j − target_j)²` (rad or m) for every coordinate `j` with `w_j > 0`. Length nq.
     pub coordinate_weights: Vec<f64>,
     pub coordinate_targets: Vec<f64>,
+    /// The posture of a static trial where it is not the anatomical neutral: `(coordinate index,
+    /// value rad or m)` (an OpenSim Scale setup's marker-placer coordinate values).
+    pub static_posture_values: Vec<(usize, f64)>,
     /// The model's up direction in its world frame (opposite to its gravity); `None` when the
     /// model has no gravity.
     pub up: Option<nalgebra::Vector3<f64>>,
@@ -124,6 +127,7 @@ impl Context {
             marker_weights,
             coordinate_weights: vec![0.0; nq],
             coordinate_targets: vec![0.0; nq],
+            static_posture_values: Vec::new(),
             up: Some(nalgebra::Vector3::z()),
             model_source,
             warnings: Vec::new(),

@@ -11,6 +11,7 @@ pub mod frames;
 pub mod ik_tasks;
 pub mod lanes;
 pub mod matching;
+pub mod plausibility;
 pub mod report;
 pub mod stats;
 pub mod stream;

@@ -63,6 +63,9 @@ pub struct TrialReport {
     pub pose_error_deg: Option<PoseError>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub scale_error_pct: Option<ScaleError>,
+    /// Joint angles against what a person does: ranges, limits, jumps, left/right differences.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plausibility: Option<super::plausibility::PosePlausibility>,
 }
 
 /// Totals over the run.
@@ -121,6 +124,12 @@ pub struct CalibrationReport {
     pub marker_moves_mm: Vec<(String, f64)>,
     /// Scales with their z-scores, dimensions against the prior, stature.
     pub prior: crate::solve::prior::PriorReport,
+    /// Each registered marker's move with its class and why it has it; landmarks moved too far.
+    #[serde(default)]
+    pub registration: crate::solve::prior::RegistrationReport,
+    /// The static trial's posture (mean angles of its calibration frames), when there was one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub static_posture: Option<crate::solve::prior::StaticPostureReport>,
 }
 
 impl CalibrationReport {
@@ -166,6 +175,8 @@ impl CalibrationReport {
             registered_markers: cal.registered,
             marker_moves_mm: moves,
             prior: cal.prior.clone(),
+            registration: cal.registration_report.clone(),
+            static_posture: (cal.static_frames > 0).then(|| cal.posture.clone()),
         }
     }
 }
@@ -228,6 +239,7 @@ impl Report {
             input: None,
             pose_error_deg: None,
             scale_error_pct: None,
+            plausibility: None,
         }
     }
 
@@ -312,7 +324,17 @@ pub fn trial_report(ctx: &Context, r: &TrialResult, truth: Option<&Truth>) -> Tr
         input: None,
         pose_error_deg,
         scale_error_pct,
+        plausibility: Some(pose_plausibility(ctx, r)),
     }
+}
+
+/// The pose check ([`super::plausibility`]) of a solved trial.
+pub fn pose_plausibility(ctx: &Context, r: &TrialResult) -> super::plausibility::PosePlausibility {
+    let mut check = super::plausibility::PoseCheck::new(ctx);
+    for (f, (p, st)) in r.proxies.iter().zip(&r.stats).enumerate() {
+        check.frame(f, p, st.status != FrameStatus::TooFewMarkers);
+    }
+    check.finish()
 }
 
 fn errors_against(

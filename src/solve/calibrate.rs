@@ -53,6 +53,15 @@ pub struct Calibration {
     /// placement; `None` when the offsets stayed the model's.
     #[serde(skip)]
     pub marker_offsets: Option<Vec<Vector3<f64>>>,
+    /// Calibration frames from static trials (the first ones of `frame_proxies`).
+    #[serde(default)]
+    pub static_frames: usize,
+    /// The static frames' posture, and what makes it implausible for a standing subject.
+    #[serde(default)]
+    pub posture: super::prior::StaticPostureReport,
+    /// Each marker's move by registration or placement, and the landmarks moved too far.
+    #[serde(default)]
+    pub registration_report: super::prior::RegistrationReport,
 }
 
 impl Calibration {
@@ -67,6 +76,8 @@ impl Calibration {
         for s in self.prior.scales.iter().filter(|s| s.at_bound) {
             out.push(format!("scale {} = {:.3} is at its bound [{}, {}]", s.name, s.value, s.range.0, s.range.1));
         }
+        out.extend(self.posture.suspect.iter().cloned());
+        out.extend(self.registration_report.suspect.iter().cloned());
         out
     }
 
@@ -80,6 +91,7 @@ impl Calibration {
                 .map_or("the stature-ratio prior".to_string(), |d| format!("its dimension '{d}'"));
             out.push(format!("scale {} = {:.3} is {:.1} standard deviations from {of}", s.name, s.value, s.z));
         }
+        out.extend(self.registration_report.warnings.iter().cloned());
         out
     }
 }
@@ -96,9 +108,10 @@ pub struct JointProblem<'a> {
     pub frames: &'a [&'a [f64]],
     /// Marker weights of each frame (a static trial's and a motion's may differ).
     pub weights: &'a [&'a [f64]],
-    /// Coordinate targets (length ny) and weights.
-    pub tracking_ref: &'a [f64],
-    pub tracking_weights: &'a [f64],
+    /// Coordinate targets (length ny each) and their weights, per frame: an IK setup's
+    /// coordinate tasks, and a static frame's pull toward its known posture.
+    pub tracking_refs: &'a [&'a [f64]],
+    pub tracking_weights: &'a [&'a [f64]],
     /// Markers whose offsets are unknowns.
     pub registered: &'a [bool],
     /// Centre of each marker's offset bound (unit-scale body frame, m).
@@ -171,12 +184,12 @@ impl JointProblem<'_> {
         let eval = Evaluator::new(&model, self.proxy);
         let mut ws = EvalWorkspace::new(&model, self.proxy);
         let (mut e, mut rmse, mut counted) = (0.0, 0.0, 0);
-        for ((obs, p), w) in self.frames.iter().zip(&state.poses).zip(self.weights) {
+        for (k, ((obs, p), w)) in self.frames.iter().zip(&state.poses).zip(self.weights).enumerate() {
             let fp = FrameProblem {
                 observed: obs,
                 marker_weights: w,
-                tracking_ref: self.tracking_ref,
-                tracking_weights: self.tracking_weights,
+                tracking_ref: self.tracking_refs[k],
+                tracking_weights: self.tracking_weights[k],
             };
             let (ek, sq, used) = eval.energy(p, &fp, &mut ws);
             e += ek;
@@ -219,13 +232,13 @@ impl JointProblem<'_> {
                 rhs -= gz;
             }
             let mut blocks: Vec<Option<FrameBlocks>> = Vec::with_capacity(self.frames.len());
-            for ((obs, p), mw) in self.frames.iter().zip(&state.poses).zip(self.weights) {
+            for (k, ((obs, p), mw)) in self.frames.iter().zip(&state.poses).zip(self.weights).enumerate() {
                 // Coordinate targets alone (marker weights 0) give the tracking part of H and g.
                 let tp = FrameProblem {
                     observed: obs,
                     marker_weights: &zero_w,
-                    tracking_ref: self.tracking_ref,
-                    tracking_weights: self.tracking_weights,
+                    tracking_ref: self.tracking_refs[k],
+                    tracking_weights: self.tracking_weights[k],
                 };
                 eval.linearize(p, &tp, &mut ws);
                 let mut a = ws.gn.h.select_rows(&pose).select_columns(&pose);
@@ -400,14 +413,16 @@ pub fn calibrate(
     let offsets: Vec<Vector3<f64>> = model.markers.iter().map(|m| m.offset).collect();
     let registered = vec![false; model.markers.len()];
     let weights = vec![frame_template.marker_weights; frames.len()];
+    let refs = vec![frame_template.tracking_ref; frames.len()];
+    let tracking_weights = vec![frame_template.tracking_weights; frames.len()];
     let problem = JointProblem {
         model,
         proxy,
         settings: &solver.settings,
         frames,
         weights: &weights,
-        tracking_ref: frame_template.tracking_ref,
-        tracking_weights: frame_template.tracking_weights,
+        tracking_refs: &refs,
+        tracking_weights: &tracking_weights,
         registered: &registered,
         reference: &offsets,
         bound_m: 0.0,
@@ -479,6 +494,9 @@ pub fn finish(
         prior: Default::default(),
         frame_proxies: state.poses,
         marker_offsets: offsets,
+        static_frames: 0,
+        posture: Default::default(),
+        registration_report: Default::default(),
     }
 }
 

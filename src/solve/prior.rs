@@ -94,12 +94,16 @@ impl GlobalTerm for Anisotropy {
     }
 }
 
-/// `½ Σ_m κ_m ‖o_m − o_m⁰‖²` over registered markers: offsets stay near the model's, strongly
-/// for anatomical markers, weakly for tracking markers (`κ_m = σ_n² / σ_m²`).
+/// `½ Σ_m Σ_a κ_ma (o_ma − o_ma⁰)²` over registered markers and the three axes `a` of their
+/// body's frame: offsets stay near the model's, strongly for anatomical markers, weakly for
+/// tracking markers, and per axis where a marker's role constrains one direction only (a
+/// Plug-in Gait wand lies in its segment's coronal plane: tight front to back, free along the
+/// segment and outward). `κ_ma = σ_n² / σ_ma²`.
 #[derive(Clone, Debug)]
 pub struct OffsetPrior {
     pub reference: Vec<Vector3<f64>>,
-    pub weight: Vec<f64>,
+    /// Per marker, the weight of each body-frame axis.
+    pub weight: Vec<Vector3<f64>>,
 }
 
 impl GlobalTerm for OffsetPrior {
@@ -112,11 +116,11 @@ impl GlobalTerm for OffsetPrior {
             let Some(c) = *col else { continue };
             let d = x.offsets[m] - self.reference[m];
             let w = self.weight[m];
-            e += 0.5 * w * d.norm_squared();
+            e += 0.5 * d.component_mul(&d).dot(&w);
             if let Some((h, g)) = hg.as_mut() {
                 for a in 0..3 {
-                    h[(c + a, c + a)] += w;
-                    g[c + a] += w * d[a];
+                    h[(c + a, c + a)] += w[a];
+                    g[c + a] += w[a] * d[a];
                 }
             }
         }
@@ -243,4 +247,231 @@ pub struct PriorReport {
     pub scales: Vec<ScaleReport>,
     /// Survey dimensions `(name, value m, prior mean m, prior sd m)`.
     pub dimensions: Vec<(String, f64, f64, f64)>,
+}
+
+/// The known posture of a static trial (a per-frame term: it acts on each static calibration
+/// frame's pose, not on the subject's globals): `½ w Σ_j (q_j − q_j⁰)²` over the non-root
+/// coordinates, `q⁰` the anatomical neutral (0 within the coordinate's range; an OpenSim Scale
+/// setup's coordinate values where it gives them), `w = (σ_n / σ_q)²` so that a deviation of one
+/// standard deviation `σ_q` costs what one marker missed by the marker noise `σ_n` costs. It fixes
+/// what the markers of a standing subject cannot: the rotation about a long axis of a body whose
+/// markers are free (a thigh wand), and the pose traded against registered marker offsets
+/// (Plug-in Gait's static calibration defines the neutral the same way; OpenSim's MarkerPlacer
+/// solves the static pose toward its setup's coordinate values). Derivation: docs/CALIBRATION.md.
+#[derive(Clone, Debug)]
+pub struct StaticPosture {
+    /// Target per state entry (length ny; only coordinates are pulled).
+    pub reference: Vec<f64>,
+    /// Weight per state entry (m² per rad² or per m²).
+    pub weights: Vec<f64>,
+}
+
+impl StaticPosture {
+    /// The neutral posture of `model` with standard deviation `sd_rad` for rotational coordinates
+    /// (translations are not pulled), priced at marker noise `noise_m`; `values` overrides the
+    /// neutral of coordinates by index (an OpenSim Scale setup's coordinate values, rad or m).
+    pub fn neutral(model: &Model, sd_rad: f64, noise_m: f64, values: &[(usize, f64)]) -> StaticPosture {
+        let ny = model.ny();
+        let mut reference = vec![0.0; ny];
+        let mut weights = vec![0.0; ny];
+        if sd_rad <= 0.0 {
+            return StaticPosture { reference, weights };
+        }
+        let w = (noise_m / sd_rad).powi(2);
+        for (j, held) in StaticPosture::held_coordinates(model).into_iter().enumerate() {
+            if !held {
+                continue;
+            }
+            let c = &model.coordinates[j];
+            let target = values.iter().find(|(k, _)| *k == j).map_or(0.0, |(_, v)| *v);
+            reference[j] = target.clamp(c.range.0, c.range.1);
+            weights[j] = w;
+        }
+        StaticPosture { reference, weights }
+    }
+
+    /// The coordinates a standing posture fixes: rotational, unlocked, not of the root body (the
+    /// subject's place and heading are free) and not of an arm (a static trial's arms are held as
+    /// its protocol says: down, in a T or crossed). Arm bodies are told by name (humerus, ulna,
+    /// radius, hand, arm, scapula, clavicle, wrist, elbow, shoulder, finger).
+    pub fn held_coordinates(model: &Model) -> Vec<bool> {
+        const ARM: [&str; 11] =
+            ["humer", "ulna", "radius", "hand", "arm", "scap", "clav", "wrist", "elbow", "shoulder", "finger"];
+        let mut held = vec![false; model.nq()];
+        for b in model.bodies.iter().filter(|b| b.parent.is_some()) {
+            let name = b.name.to_ascii_lowercase();
+            if ARM.iter().any(|a| name.contains(a)) {
+                continue;
+            }
+            for m in &model.motions[b.joint.motions.clone()] {
+                if let Some(c) = m.coordinate {
+                    let coord = &model.coordinates[c];
+                    held[c] = !coord.locked && coord.kind == crate::model::CoordinateKind::Rotational;
+                }
+            }
+        }
+        // A coordinate that also drives the root's motion stays free.
+        for b in model.bodies.iter().filter(|b| b.parent.is_none()) {
+            for m in &model.motions[b.joint.motions.clone()] {
+                if let Some(c) = m.coordinate {
+                    held[c] = false;
+                }
+            }
+        }
+        held
+    }
+
+    /// This term folded into the tracking arrays `(reference, weights)` of a frame (an IK setup's
+    /// coordinate targets): the sum of both quadratics, up to a constant.
+    pub fn fold(&self, reference: &[f64], weights: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        let mut r = reference.to_vec();
+        crate::kinematics::assembly::fold_tracking_reference(&mut r, weights, &self.reference, &self.weights);
+        let w = weights.iter().zip(&self.weights).map(|(a, b)| a + b).collect();
+        (r, w)
+    }
+}
+
+/// Holds the common rotation of a body's registered markers: the rotation `ω` that best explains
+/// their offsets' displacements `d_m = o_m − o_m⁰` (`d_m ≈ ω × p_m`, `p_m = o_m⁰ − c`, `c` their
+/// centroid) is penalised as `½ κ Σ_m ‖ω × p_m‖²`, `κ` times the squared displacement that rotation
+/// explains. That part cannot be told from the body's own rotation (turning every marker of a foot
+/// back while the foot turns forward fits the markers as well): left free, registration buys
+/// marker fit with joint angles. Used on the bodies whose registered markers are all free
+/// (clusters, wands): their landmarks would otherwise hold it. Couples only the offsets of one
+/// body's markers. Derivation: docs/CALIBRATION.md.
+#[derive(Clone, Debug)]
+pub struct LandmarkAnchor {
+    /// The anchored bodies.
+    pub bodies: Vec<AnchoredBody>,
+    /// `κ` (m² objective per m² of rotational displacement).
+    pub weight: f64,
+    /// Reference offset of every model marker (unit-scale body frame, m).
+    pub reference: Vec<Vector3<f64>>,
+}
+
+/// One body's markers in a [`LandmarkAnchor`].
+#[derive(Clone, Debug)]
+pub struct AnchoredBody {
+    pub markers: Vec<usize>,
+    /// `G` (3n × k, k ≤ 3): orthonormal columns spanning the rotational displacements of the
+    /// markers, so that the rotational part of `d` is `G Gᵀ d` and its squared norm `‖Gᵀ d‖²`.
+    pub basis: DMatrix<f64>,
+}
+
+impl LandmarkAnchor {
+    /// The anchor of the markers `anchored` (per model marker) at reference offsets `reference`
+    /// (unit-scale body frame, m), per body; bodies with fewer than two of them get none.
+    pub fn new(model: &Model, reference: &[Vector3<f64>], anchored: &[bool], weight: f64) -> LandmarkAnchor {
+        let mut bodies = Vec::new();
+        for b in 0..model.bodies.len() {
+            let markers: Vec<usize> =
+                (0..model.markers.len()).filter(|&m| anchored[m] && model.markers[m].body == b).collect();
+            if markers.len() < 2 {
+                continue;
+            }
+            let n = markers.len();
+            let c = markers.iter().map(|&m| reference[m]).sum::<Vector3<f64>>() / n as f64;
+            // Generators of the rotational displacements: ω × p for ω along each axis.
+            let mut gen = DMatrix::zeros(3 * n, 3);
+            for (i, &m) in markers.iter().enumerate() {
+                let p = reference[m] - c;
+                for a in 0..3 {
+                    let r = Vector3::ith(a, 1.0).cross(&p);
+                    for k in 0..3 {
+                        gen[(3 * i + k, a)] = r[k];
+                    }
+                }
+            }
+            // Orthonormal basis of their span (two markers cannot see the rotation about the
+            // line through them: that direction drops out).
+            let svd = gen.svd(true, false);
+            let u = svd.u.expect("u requested");
+            let smax = svd.singular_values.max();
+            let keep: Vec<usize> =
+                (0..svd.singular_values.len()).filter(|&i| svd.singular_values[i] > 1e-6 * smax.max(1e-12)).collect();
+            let basis = u.select_columns(&keep);
+            bodies.push(AnchoredBody { markers, basis });
+        }
+        LandmarkAnchor { bodies, weight, reference: reference.to_vec() }
+    }
+}
+
+impl GlobalTerm for LandmarkAnchor {
+    fn name(&self) -> &'static str {
+        "landmark_anchor"
+    }
+    fn add(&self, x: &Globals<'_>, mut hg: Option<(&mut DMatrix<f64>, &mut DVector<f64>)>) -> f64 {
+        let mut e = 0.0;
+        for body in &self.bodies {
+            let n = body.markers.len();
+            let mut d = DVector::zeros(3 * n);
+            for (i, &m) in body.markers.iter().enumerate() {
+                let dm = x.offsets[m] - self.reference[m];
+                d.rows_mut(3 * i, 3).copy_from(&dm);
+            }
+            let coef = body.basis.tr_mul(&d);
+            e += 0.5 * self.weight * coef.norm_squared();
+            let Some((h, g)) = hg.as_mut() else { continue };
+            let cols: Vec<Option<usize>> = body.markers.iter().map(|&m| x.offset_col[m]).collect();
+            let grad = &body.basis * &coef * self.weight;
+            let hess = &body.basis * body.basis.transpose() * self.weight;
+            for (i, ci) in cols.iter().enumerate() {
+                let Some(ci) = *ci else { continue };
+                for a in 0..3 {
+                    g[ci + a] += grad[3 * i + a];
+                    for (j, cj) in cols.iter().enumerate() {
+                        let Some(cj) = *cj else { continue };
+                        for b in 0..3 {
+                            h[(ci + a, cj + b)] += hess[(3 * i + a, 3 * j + b)];
+                        }
+                    }
+                }
+            }
+        }
+        e
+    }
+}
+
+/// Mean angles of a left/right pair (degrees).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Asymmetry {
+    /// The pair's name without its side (`knee_angle`).
+    pub coordinate: String,
+    pub right: f64,
+    pub left: f64,
+    /// `left − right`.
+    pub difference: f64,
+}
+
+/// The posture of a calibration's static frames (degrees): per rotational coordinate, the mean
+/// over the frames; with what makes it implausible for a standing subject.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct StaticPostureReport {
+    pub frames: usize,
+    /// `(coordinate, mean angle)` of the coordinates the static posture prior holds.
+    pub angles: Vec<(String, f64)>,
+    pub asymmetry: Vec<Asymmetry>,
+    /// Why the posture is not a standing subject's (makes the calibration `suspect`).
+    pub suspect: Vec<String>,
+}
+
+/// One marker's move by registration or placement (mm at the subject's scale).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct MarkerMove {
+    pub marker: String,
+    pub class: crate::model::MarkerClass,
+    /// Why it has its class ([`crate::model::ClassSource`]).
+    pub class_from: crate::model::ClassSource,
+    pub moved_mm: f64,
+}
+
+/// What registration did to the markers, for the report.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct RegistrationReport {
+    /// Every registered marker's move, largest first.
+    pub moves: Vec<MarkerMove>,
+    /// Landmarks moved beyond half the suspect threshold (worth a look).
+    pub warnings: Vec<String>,
+    /// Landmarks moved beyond `registration_suspect_mm`: the calibration is `suspect`.
+    pub suspect: Vec<String>,
 }

@@ -149,6 +149,18 @@ pub struct SolverSettings {
     /// Standard deviation of the difference between two axes' factors of one body (`xyz`
     /// scale groups; the anisotropy penalty). Default 0.05.
     pub anisotropy_sd: f64,
+    /// Standard deviation (degrees) of a static trial's joint angles about the anatomical
+    /// neutral (or an OpenSim Scale setup's coordinate values) in calibration: the subject is
+    /// known to stand upright, so what the markers cannot tell (a thigh's rotation under a
+    /// free wand, a pose traded against registered marker offsets) is taken from the posture.
+    /// Default 5 (a standing subject's knees, hips and ankles lie within a few degrees of
+    /// neutral); 0 disables it.
+    pub static_posture_sd_deg: f64,
+    /// A landmark (anatomical marker) that registration moved further than this (mm, at the
+    /// subject's scale) makes the calibration `suspect`; half of it is a warning. Default 20:
+    /// placement on a bony landmark errs by 10–20 mm; a larger move says the marker is not
+    /// where the model thinks (a mislabelled or misplaced marker, or a model that does not fit).
+    pub registration_suspect_mm: f64,
 }
 
 impl Default for SolverSettings {
@@ -189,6 +201,8 @@ impl Default for SolverSettings {
             anthropometric_weight: 1.0,
             scale_prior_sd: 0.1,
             anisotropy_sd: 0.05,
+            static_posture_sd_deg: 5.0,
+            registration_suspect_mm: 20.0,
         }
     }
 }

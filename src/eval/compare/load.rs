@@ -11,8 +11,12 @@ use crate::io::markers::units_to_metres;
 use serde::Deserialize;
 use std::path::Path;
 
-/// The shipped map from Plug-in Gait's angle outputs to OpenSim-style coordinate names.
-pub const PLUG_IN_GAIT_MAP: &str = include_str!("../../../models/compare/plugingait.toml");
+/// The shipped maps from angle outputs to coordinate names, by name: Plug-in Gait to the shipped
+/// model's coordinates, and to OpenSim's Rajagopal family (whose pelvis tilt has the other sign).
+pub const SHIPPED_MAPS: &[(&str, &str)] = &[
+    ("plugingait", include_str!("../../../models/compare/plugingait.toml")),
+    ("plugingait-opensim", include_str!("../../../models/compare/plugingait-opensim.toml")),
+];
 
 /// Errors reading a side of a comparison.
 #[derive(Debug, thiserror::Error)]
@@ -78,9 +82,16 @@ impl AngleMap {
         Ok(map)
     }
 
-    /// The shipped Plug-in Gait map.
+    /// The shipped Plug-in Gait map for the shipped model.
     pub fn plug_in_gait() -> AngleMap {
-        AngleMap::parse(PLUG_IN_GAIT_MAP, "models/compare/plugingait.toml").expect("the shipped map parses")
+        AngleMap::shipped("plugingait").expect("the shipped map exists")
+    }
+
+    /// The shipped map called `name` ([`SHIPPED_MAPS`]).
+    pub fn shipped(name: &str) -> Option<AngleMap> {
+        SHIPPED_MAPS.iter().find(|(n, _)| *n == name).map(|(n, text)| {
+            AngleMap::parse(text, &format!("models/compare/{n}.toml")).expect("shipped maps parse")
+        })
     }
 }
 
@@ -177,11 +188,15 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_shipped_plug_in_gait_map_parses_and_names_both_sides() {
-        let m = AngleMap::plug_in_gait();
-        for c in ["knee_angle_r", "knee_angle_l", "hip_flexion_r", "ankle_angle_l"] {
-            assert!(m.angle.iter().any(|e| e.coordinate == c), "{c}");
+    fn the_shipped_maps_parse_and_name_both_sides() {
+        for (name, _) in SHIPPED_MAPS {
+            let m = AngleMap::shipped(name).unwrap();
+            for c in ["knee_angle_r", "knee_angle_l", "hip_flexion_r", "ankle_angle_l", "pelvis_tilt"] {
+                assert!(m.angle.iter().any(|e| e.coordinate == c), "{name}: {c}");
+            }
         }
+        let tilt = |n: &str| AngleMap::shipped(n).unwrap().angle.into_iter().find(|e| e.coordinate == "pelvis_tilt");
+        assert_eq!(tilt("plugingait").unwrap().sign, -tilt("plugingait-opensim").unwrap().sign);
     }
 
     #[test]
