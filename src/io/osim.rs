@@ -58,7 +58,7 @@ pub use export::{
     format_osim, format_scale_set, OsimWriteError, GENERATED_GRAVITY, PLACEHOLDER_INERTIA, PLACEHOLDER_MASS,
 };
 pub use func::simm_spline;
-pub use ik_setup::{parse_ik_setup, read_ik_setup, IkSetup};
+pub use ik_setup::{parse_ik_setup, read_ik_setup, CoordinateValue, IkCoordinateTask, IkSetup};
 pub use markers::{parse_marker_set, read_marker_set};
 pub use scale::{scale_inertia, scale_osim, MassScaling};
 pub use scale_setup::{parse_scale_setup, read_scale_setup, Measurement, ScaleSetup};

@@ -482,7 +482,9 @@ fn registration_report(ctx: &Context, cal: &Calibration) -> crate::solve::prior:
         })
         .collect();
     moves.sort_by(|a, b| b.moved_mm.total_cmp(&a.moved_mm));
-    let limit = ctx.settings.registration_suspect_mm;
+    // Placement moves markers where the setup says (OpenSim's MarkerPlacer): reported, not judged.
+    let judged = ctx.settings.registration && !ctx.settings.marker_placement;
+    let limit = if judged { ctx.settings.registration_suspect_mm } else { f64::INFINITY };
     let landmarks = moves.iter().filter(|m| m.class == MarkerClass::Anatomical);
     let far = |k: f64| -> Vec<String> {
         landmarks

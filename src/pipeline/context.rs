@@ -45,9 +45,11 @@ pub struct Context {
     /// `½·w_j·(q_j − target_j)²` (rad or m) for every coordinate `j` with `w_j > 0`. Length nq.
     pub coordinate_weights: Vec<f64>,
     pub coordinate_targets: Vec<f64>,
-    /// The posture of a static trial where it is not the anatomical neutral: `(coordinate index,
-    /// value rad or m)` (an OpenSim Scale setup's marker-placer coordinate values).
-    pub static_posture_values: Vec<(usize, f64)>,
+    /// The posture of a static trial as a setup gives it: `(coordinate index, value rad or m,
+    /// weight)` (an OpenSim Scale setup's `MarkerPlacer` coordinate tasks, `weight·(q − value)²`
+    /// in the static frames, as OpenSim solves the static pose); other coordinates are held by
+    /// the static posture prior.
+    pub static_posture_values: Vec<(usize, f64, f64)>,
     /// The model's up direction in its world frame (opposite to its gravity); `None` when the
     /// model has no gravity.
     pub up: Option<nalgebra::Vector3<f64>>,
@@ -252,10 +254,26 @@ impl Context {
             .zip(&self.calibration_weights)
             .map(|(m, &w)| setup.static_weights.get(&m.name).copied().unwrap_or(w))
             .collect();
+        let mut static_posture_values = Vec::new();
+        for t in &setup.static_coordinate_tasks {
+            let Some(j) = self.model.coordinate_index(&t.name) else {
+                warnings.push(format!("{setup_name}: line {}: coordinate task for '{}', which the model lacks; skipped", t.line, t.name));
+                continue;
+            };
+            let value = match t.value {
+                crate::io::osim::CoordinateValue::Default => self.model.coordinates[j].default,
+                crate::io::osim::CoordinateValue::Manual(v) => v,
+                crate::io::osim::CoordinateValue::FromFile => {
+                    warnings.push(format!("{setup_name}: line {}: coordinate task '{}' takes its value from a file, which smocap does not read; the static posture prior holds it instead", t.line, t.name));
+                    continue;
+                }
+            };
+            static_posture_values.push((j, value, t.weight));
+        }
         let mut subject = self.subject;
         subject.height_m = subject.height_m.or(setup.height_m);
         subject.mass_kg = subject.mass_kg.or(setup.mass_kg);
-        Ok(Context { profile, proxy, settings, calibration_weights, warnings, subject, ..self.clone() })
+        Ok(Context { profile, proxy, settings, calibration_weights, warnings, subject, static_posture_values, ..self.clone() })
     }
 
     /// Tracking arrays (length ny) holding only the coordinate targets: `(reference, weights)`.

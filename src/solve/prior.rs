@@ -267,25 +267,26 @@ pub struct StaticPosture {
 }
 
 impl StaticPosture {
-    /// The neutral posture of `model` with standard deviation `sd_rad` for rotational coordinates
-    /// (translations are not pulled), priced at marker noise `noise_m`; `values` overrides the
-    /// neutral of coordinates by index (an OpenSim Scale setup's coordinate values, rad or m).
-    pub fn neutral(model: &Model, sd_rad: f64, noise_m: f64, values: &[(usize, f64)]) -> StaticPosture {
+    /// The neutral posture of `model` with standard deviation `sd_rad` for the coordinates a
+    /// standing posture fixes ([`StaticPosture::held_coordinates`]), priced at marker noise
+    /// `noise_m`; `tasks` `(coordinate, value rad or m, weight)` replace it where a setup gives
+    /// the static pose (an OpenSim Scale setup's `MarkerPlacer` coordinate tasks, with their own
+    /// weights, as OpenSim weighs them against its markers).
+    pub fn neutral(model: &Model, sd_rad: f64, noise_m: f64, tasks: &[(usize, f64, f64)]) -> StaticPosture {
         let ny = model.ny();
         let mut reference = vec![0.0; ny];
         let mut weights = vec![0.0; ny];
-        if sd_rad <= 0.0 {
-            return StaticPosture { reference, weights };
-        }
         let w = (noise_m / sd_rad).powi(2);
         for (j, held) in StaticPosture::held_coordinates(model).into_iter().enumerate() {
-            if !held {
-                continue;
+            if held && sd_rad > 0.0 {
+                let c = &model.coordinates[j];
+                reference[j] = 0.0f64.clamp(c.range.0, c.range.1);
+                weights[j] = w;
             }
-            let c = &model.coordinates[j];
-            let target = values.iter().find(|(k, _)| *k == j).map_or(0.0, |(_, v)| *v);
-            reference[j] = target.clamp(c.range.0, c.range.1);
-            weights[j] = w;
+        }
+        for &(j, value, weight) in tasks {
+            reference[j] = value;
+            weights[j] = weight;
         }
         StaticPosture { reference, weights }
     }

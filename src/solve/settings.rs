@@ -117,13 +117,19 @@ pub struct SolverSettings {
     /// strongly, tracking markers weakly). Default true; off with `--no-register`, and an
     /// OpenSim Scale setup's `MarkerPlacer` decides instead when one is given.
     pub registration: bool,
-    /// Standard deviation of an anatomical marker's offset about the model's (m). Default 0.003:
-    /// stiff enough that a body's scale is not traded for moving all its landmarks together
-    /// (with 0.005–0.01 the synthetic audit's scale error grows from 3.7 to 5–11 mm).
+    /// Standard deviation of a landmark's (anatomical marker's) offset about the model's (m),
+    /// weighed like the scale priors: one standard deviation costs what `prior_fraction ×
+    /// (calibration frames)` frames with one marker missed by `prior_noise_sd_m` cost, so landmarks
+    /// stay within millimetres however many frames calibration uses. Default 0.003. (A prior of
+    /// one frame's weight washed out: 96 frames moved knee and ASIS markers by 20–40 mm and bent
+    /// the joints to buy marker fit.)
     pub registration_anatomical_sd_m: f64,
     /// Standard deviation of a tracking marker's offset about the model's (m). Default 0.1.
     pub registration_tracking_sd_m: f64,
-    /// Largest move of a marker's offset from the model's, per axis (m). Default 0.2.
+    /// Largest move of a marker's offset from the model's, per axis (m). Default 0.35: generic
+    /// models put cluster markers at placeholder positions (OpenCap's shank cluster sits 0.23 m
+    /// from where the subject wore it; a bound of 0.2 m left that shank 26 mm off its markers and
+    /// its hip 4° out of plane). Landmarks are held far closer by their prior.
     pub registration_bound_m: f64,
     /// Marker noise `σ_n` (m) that puts the priors in the marker objective's units: one standard
     /// deviation of a prior costs what one marker missed by `σ_n` in one frame costs. Default
@@ -195,7 +201,7 @@ impl Default for SolverSettings {
             registration: true,
             registration_anatomical_sd_m: 0.003,
             registration_tracking_sd_m: 0.1,
-            registration_bound_m: 0.2,
+            registration_bound_m: 0.35,
             prior_noise_sd_m: 0.01,
             prior_fraction: 0.1,
             anthropometric_weight: 1.0,

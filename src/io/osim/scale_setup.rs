@@ -29,6 +29,9 @@ pub struct ScaleSetup {
     pub place_markers: bool,
     /// Static-pose marker weights of the `MarkerPlacer` tasks (`apply` false → 0).
     pub static_weights: BTreeMap<String, f64>,
+    /// The `MarkerPlacer`'s applied coordinate tasks: the static pose's known coordinate values
+    /// (OpenSim solves the static pose toward them before placing markers).
+    pub static_coordinate_tasks: Vec<super::ik_setup::IkCoordinateTask>,
     /// `GenericModelMaker` `marker_set_file`, resolved against the setup's folder.
     pub marker_set_file: Option<PathBuf>,
     /// `MarkerPlacer` `marker_file` (the static trial), resolved against the setup's folder.
@@ -92,6 +95,7 @@ pub fn parse_scale_setup(text: &str, file_name: &str, base: &Path) -> Result<Sca
         for t in tasks.marker_tasks {
             out.static_weights.insert(t.name, if t.apply { t.weight } else { 0.0 });
         }
+        out.static_coordinate_tasks = tasks.coordinate_tasks.into_iter().filter(|t| t.apply && t.weight > 0.0).collect();
     }
     Ok(out)
 }
