@@ -324,20 +324,33 @@ fn implausible_or_unknown_subject_data_is_a_clear_error() {
 }
 
 #[test]
-fn numbered_markers_sharing_a_prefix_are_a_tracking_cluster_when_the_file_flags_none() {
+fn marker_roles_come_from_the_profile_then_the_landmark_table_then_deliberate_flags() {
+    use smocap::model::MarkerClass::*;
     let mut model = Context::shipped().expect("shipped").model;
-    // `T12` shares its one-letter stem with the model's `T10`: vertebrae, not a cluster.
-    for (i, n) in ["r_thigh1", "r_thigh2", "r_thigh3", "T12"].iter().enumerate() {
+    // Names the table does not know: numbered names sharing a stem are a cluster; `T12` shares
+    // its one-letter stem with the model's `T10` and is a vertebra in the table anyway.
+    for (i, n) in ["zz_pad1", "zz_pad2", "zz_pad3", "T12", "zz_other"].iter().enumerate() {
         model.markers[i].name = n.to_string();
     }
-    let classes = smocap::model::marker_classes(&model, &[], &["r_thigh3".into()]);
-    use smocap::model::MarkerClass::*;
-    assert_eq!(&classes[..4], &[Tracking, Tracking, Anatomical, Anatomical]);
-    // A file that flags any marker: unflagged markers are anatomical.
-    model.markers[10].class = Some(Tracking);
+    let classes = smocap::model::marker_classes(&model, &[], &["zz_pad3".into()]);
+    assert_eq!(&classes[..5], &[Tracking, Tracking, Anatomical, Anatomical, Anatomical]);
+    // The table decides for names it knows, whatever the file's flags: the shipped model's
+    // Plug-in Gait wands are free, its knee markers landmarks.
+    let thi = model.marker_index("RTHI").expect("RTHI");
+    let kne = model.marker_index("RKNE").expect("RKNE");
+    model.markers[kne].class = Some(Tracking);
     let classes = smocap::model::marker_classes(&model, &[], &[]);
-    assert_eq!(&classes[..2], &[Anatomical, Anatomical]);
-    assert_eq!(classes[10], Tracking);
+    assert_eq!((classes[thi], classes[kne]), (Tracking, Anatomical));
+    // `<fixed>false</fixed>` on every marker is OpenSim's default, not a statement: ignored.
+    for m in &mut model.markers {
+        m.class = Some(Tracking);
+    }
+    let classes = smocap::model::marker_classes(&model, &[], &[]);
+    assert_eq!(classes[4], Anatomical, "an unknown name flagged as everything else stays a landmark");
+    // A set that flags both values deliberately decides for names the table does not know.
+    model.markers[3].class = Some(Anatomical);
+    let classes = smocap::model::marker_classes(&model, &[], &[]);
+    assert_eq!(classes[4], Tracking);
 }
 
 #[test]

@@ -32,6 +32,11 @@ pub struct AuditArgs {
     /// Write the report (per-subject errors of both methods, wins, real datasets) as JSON here.
     #[arg(long)]
     pub report_json: Option<PathBuf>,
+    /// Synthetic markers as a lab places them on skin (`SubjectSpec::realistic`): landmarks
+    /// misplaced 10–20 mm along the skin, wands 30–60 mm and turned by 10–20°, soft-tissue motion,
+    /// a standing posture 2° off neutral; default: markers misplaced 2–12 mm in any direction.
+    #[arg(long)]
+    pub realistic: bool,
     /// Override a solver setting of the synthetic subjects' solves (`KEY=VALUE`, as `solve --set`).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
@@ -42,7 +47,8 @@ pub fn run(a: AuditArgs) -> anyhow::Result<u8> {
     // The synthetic subjects calibrate on their static trial.
     ctx.static_calibration = true;
     super::solve::apply_set(&mut ctx, &a.set)?;
-    let spec = SubjectSpec { motion_frames: a.frames.max(1), ..SubjectSpec::default() };
+    let base = if a.realistic { SubjectSpec::realistic() } else { SubjectSpec::default() };
+    let spec = SubjectSpec { motion_frames: a.frames.max(1), ..base };
     let mut report = audit_synthetic(&ctx, a.subjects, a.seed, &spec);
     if !a.synthetic_only && a.datasets.is_file() {
         let datasets = read_datasets(&a.datasets, None)?;

@@ -95,10 +95,9 @@ impl GlobalTerm for Anisotropy {
 }
 
 /// `½ Σ_m Σ_a κ_ma (o_ma − o_ma⁰)²` over registered markers and the three axes `a` of their
-/// body's frame: offsets stay near the model's, strongly for anatomical markers, weakly for
-/// tracking markers, and per axis where a marker's role constrains one direction only (a
-/// Plug-in Gait wand lies in its segment's coronal plane: tight front to back, free along the
-/// segment and outward). `κ_ma = σ_n² / σ_ma²`.
+/// body's frame: offsets stay near the model's, strongly for landmarks, weakly for tracking
+/// markers (`κ_ma = σ_n² / σ_ma²`, times `prior_fraction · N` for landmarks; per axis so that a
+/// role constraining one direction only can say so).
 #[derive(Clone, Debug)]
 pub struct OffsetPrior {
     pub reference: Vec<Vector3<f64>>,

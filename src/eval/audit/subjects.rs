@@ -15,6 +15,7 @@ use crate::synth::{synthesize, SynthOptions};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 
@@ -25,12 +26,52 @@ pub struct SubjectSpec {
     pub motion_frames: usize,
     /// Scale factors uniform in `1 ± scale_spread`. Default 0.1.
     pub scale_spread: f64,
-    /// Marker misplacement norm, uniform in this range (mm). Default 2–12.
+    /// Misplacement norm of landmarks (and of every marker unless `tracking_misplace_mm` says
+    /// otherwise), uniform in this range (mm). Default 2–12.
     pub misplace_mm: (f64, f64),
-    /// Soft-tissue drift amplitude, uniform in this range (mm). Default 3–10.
+    /// Landmarks misplaced along the skin (perpendicular to the direction from their segment's
+    /// long axis, as a hand placing a marker on a bony landmark errs) rather than in any
+    /// direction. Default false.
+    #[serde(default)]
+    pub along_skin: bool,
+    /// Misplacement norm of tracking markers (wands, clusters), when other than `misplace_mm`.
+    #[serde(default)]
+    pub tracking_misplace_mm: Option<(f64, f64)>,
+    /// Tracking markers turned about their segment's long axis by an angle uniform in this range
+    /// (deg, either way): a wand or cluster strapped on at its own angle. Default none.
+    #[serde(default)]
+    pub tracking_rotation_deg: Option<(f64, f64)>,
+    /// Soft-tissue drift amplitude of landmarks (and of every marker unless `tracking_drift_mm`
+    /// says otherwise), uniform in this range (mm). Default 3–10.
     pub drift_mm: (f64, f64),
+    /// Soft-tissue drift amplitude of tracking markers, when other than `drift_mm`.
+    #[serde(default)]
+    pub tracking_drift_mm: Option<(f64, f64)>,
+    /// The static trial's posture: each coordinate a standing posture holds departs from neutral
+    /// by a normal deviate of this standard deviation (deg). Default 0 (exactly neutral).
+    #[serde(default)]
+    pub static_posture_sd_deg: f64,
     /// White noise per axis (mm). Default 1.
     pub noise_mm: f64,
+}
+
+impl SubjectSpec {
+    /// Markers as a lab places them on skin: landmarks misplaced 10–20 mm along the skin, wands
+    /// and clusters 30–60 mm and turned by 10–20° about their segment, soft tissue moving
+    /// landmarks by 3–10 mm and wands by 10–20 mm with the joints, a standing posture 2° from
+    /// neutral per joint, 1 mm noise.
+    pub fn realistic() -> SubjectSpec {
+        SubjectSpec {
+            misplace_mm: (10.0, 20.0),
+            along_skin: true,
+            tracking_misplace_mm: Some((30.0, 60.0)),
+            tracking_rotation_deg: Some((10.0, 20.0)),
+            drift_mm: (3.0, 10.0),
+            tracking_drift_mm: Some((10.0, 20.0)),
+            static_posture_sd_deg: 2.0,
+            ..SubjectSpec::default()
+        }
+    }
 }
 
 impl Default for SubjectSpec {
@@ -40,7 +81,12 @@ impl Default for SubjectSpec {
             motion_frames: 300,
             scale_spread: 0.1,
             misplace_mm: (2.0, 12.0),
+            along_skin: false,
+            tracking_misplace_mm: None,
+            tracking_rotation_deg: None,
             drift_mm: (3.0, 10.0),
+            tracking_drift_mm: None,
+            static_posture_sd_deg: 0.0,
             noise_mm: 1.0,
         }
     }
@@ -80,6 +126,22 @@ fn unit(rng: &mut ChaCha8Rng, normal: &Normal<f64>) -> [f64; 3] {
     v.map(|c| c / n)
 }
 
+/// Per body, the unit direction of its long axis in its frame: toward its first child's joint, else
+/// toward the centroid of its markers, else the body's z axis.
+fn long_axes(model: &Model) -> Vec<Vector3<f64>> {
+    (0..model.bodies.len())
+        .map(|b| {
+            let child = model.bodies.iter().find(|c| c.parent == Some(b)).map(|c| c.joint.parent_offset.translation.vector);
+            let markers: Vec<Vector3<f64>> = model.markers.iter().filter(|m| m.body == b).map(|m| m.offset).collect();
+            let centroid = (!markers.is_empty()).then(|| markers.iter().sum::<Vector3<f64>>() / markers.len() as f64);
+            child
+                .filter(|v| v.norm() > 1e-6)
+                .or(centroid.filter(|v| v.norm() > 1e-6))
+                .map_or(Vector3::z(), |v| v.normalize())
+        })
+        .collect()
+}
+
 /// Subject `index` of the audit with base seed `seed` (deterministic).
 pub fn subject(ctx: &Context, spec: &SubjectSpec, seed: u64, index: usize) -> SyntheticSubject {
     let s = seed.wrapping_mul(7919).wrapping_add(index as u64);
@@ -99,18 +161,40 @@ pub fn subject(ctx: &Context, spec: &SubjectSpec, seed: u64, index: usize) -> Sy
     let mut rng = ChaCha8Rng::seed_from_u64(s ^ 0x5eed_a0d1);
     let normal = Normal::new(0.0, 1.0).expect("unit normal");
     let nm = model.markers.len();
+    let tracking: Vec<bool> = ctx.marker_classes().iter().map(|c| *c == crate::model::MarkerClass::Tracking).collect();
+    let axes = long_axes(model);
     let misplace: Vec<[f64; 3]> = (0..nm)
-        .map(|_| {
-            let n = rng.random_range(spec.misplace_mm.0..=spec.misplace_mm.1) * 1e-3;
-            unit(&mut rng, &normal).map(|c| c * n)
+        .map(|m| {
+            let range = if tracking[m] { spec.tracking_misplace_mm.unwrap_or(spec.misplace_mm) } else { spec.misplace_mm };
+            let n = rng.random_range(range.0..=range.1) * 1e-3;
+            let mut d = Vector3::from(unit(&mut rng, &normal));
+            let o = model.markers[m].offset;
+            let u = axes[model.markers[m].body];
+            if spec.along_skin && !tracking[m] {
+                // Tangent to the skin: no component along the radial direction from the axis.
+                let radial = o - u * o.dot(&u);
+                if radial.norm() > 1e-6 {
+                    let r = radial.normalize();
+                    d -= r * d.dot(&r);
+                    d = d.try_normalize(1e-12).unwrap_or_else(|| u.cross(&r).normalize());
+                }
+            }
+            let mut moved = o + d * n;
+            if let (true, Some((lo, hi))) = (tracking[m], spec.tracking_rotation_deg) {
+                let angle = rng.random_range(lo..=hi).to_radians() * if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+                moved = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(u), angle) * moved;
+            }
+            (moved - o).into()
         })
         .collect();
     let drift: Vec<([f64; 3], Option<usize>)> = model
         .markers
         .iter()
-        .map(|m| {
-            let a = rng.random_range(spec.drift_mm.0..=spec.drift_mm.1) * 1e-3;
-            (unit(&mut rng, &normal).map(|c| c * a), drift_coordinate(model, m.body))
+        .enumerate()
+        .map(|(m, mk)| {
+            let range = if tracking[m] { spec.tracking_drift_mm.unwrap_or(spec.drift_mm) } else { spec.drift_mm };
+            let a = rng.random_range(range.0..=range.1) * 1e-3;
+            (unit(&mut rng, &normal).map(|c| c * a), drift_coordinate(model, mk.body))
         })
         .collect();
     // Static: the default pose at the subject's morphology, swaying by ≤ 0.01 rad.
@@ -118,6 +202,19 @@ pub fn subject(ctx: &Context, spec: &SubjectSpec, seed: u64, index: usize) -> Sy
     let default = proxy.default_proxies();
     let sway: Vec<(f64, f64)> =
         (0..proxy.np()).map(|_| (rng.random_range(0.1..0.5), rng.random_range(0.0..TAU))).collect();
+    // A standing posture: each proxy of a coordinate the posture holds a little off neutral.
+    let held = crate::solve::prior::StaticPosture::held_coordinates(model);
+    let stance: Vec<f64> = (0..proxy.np())
+        .map(|k| {
+            let holds = proxy.proxies[k].kind == ProxyKind::Rotation
+                && proxy.terms.iter().any(|t| t.proxy == k && held.get(t.y_index).copied().unwrap_or(false));
+            if holds && spec.static_posture_sd_deg > 0.0 {
+                spec.static_posture_sd_deg.to_radians() * normal.sample(&mut rng)
+            } else {
+                0.0
+            }
+        })
+        .collect();
     let static_p: Vec<Vec<f64>> = (0..spec.static_frames)
         .map(|f| {
             let t = f as f64 / 100.0;
@@ -126,9 +223,8 @@ pub fn subject(ctx: &Context, spec: &SubjectSpec, seed: u64, index: usize) -> Sy
                     let px = &proxy.proxies[k];
                     match px.kind {
                         ProxyKind::Scale => p_motion0[k],
-                        ProxyKind::Rotation => {
-                            (default[k] + 0.01 * (TAU * sway[k].0 * t + sway[k].1).sin()).clamp(px.range.0, px.range.1)
-                        }
+                        ProxyKind::Rotation => (default[k] + stance[k] + 0.01 * (TAU * sway[k].0 * t + sway[k].1).sin())
+                            .clamp(px.range.0, px.range.1),
                         ProxyKind::Translation => default[k],
                     }
                 })
