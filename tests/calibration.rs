@@ -43,11 +43,16 @@ fn addbiomechanics_rmse_mm(dir: &Path) -> f64 {
 }
 
 fn assert_plausible(cal: &Calibration, what: &str) {
+    assert_plausible_within(cal, what, 3.0)
+}
+
+/// No suspect finding, no scale at a bound, every scale within `sigmas` of its prior.
+fn assert_plausible_within(cal: &Calibration, what: &str, sigmas: f64) {
     assert!(cal.suspect().is_empty(), "{what}: {:?}", cal.suspect());
     assert!(!cal.prior.scales.is_empty(), "{what}: no scale report");
     for s in &cal.prior.scales {
         assert!(!s.at_bound, "{what}: {} = {} at its bound", s.name, s.value);
-        assert!(s.z.abs() <= 3.0, "{what}: {} = {:.3} is {:.2} σ from its prior", s.name, s.value, s.z);
+        assert!(s.z.abs() <= sigmas, "{what}: {} = {:.3} is {:.2} σ from its prior", s.name, s.value, s.z);
     }
 }
 
@@ -76,7 +81,13 @@ fn opencap_generic_model_fits_better_than_addbiomechanics_with_plausible_scales(
             .collect();
         let motions: Vec<(&str, &MarkerTrial)> = trials.iter().map(|(n, t)| (n.as_str(), t)).collect();
         let (cal, placed) = calibrate_placed_with(&sub.ctx, &[], &motions).expect("calibrates");
-        assert_plausible(&cal, label);
+        // With the elbow landmarks held (not slid 20 mm toward the shoulder) this subject's upper
+        // arms come out 1.24 × the model's, 3.3 σ long for the survey (AddBiomechanics: 1.26): a
+        // warning in the report, not a bound. Every other scale is within 3 σ.
+        assert_plausible_within(&cal, label, 3.5);
+        for s in cal.prior.scales.iter().filter(|s| !s.name.starts_with("humerus")) {
+            assert!(s.z.abs() <= 3.0, "{label}: {} = {:.3} is {:.2} σ from its prior", s.name, s.value, s.z);
+        }
         assert!(cal.registered > 40, "{label}: {} markers registered", cal.registered);
         let ctx = placed.expect("registration moved the markers");
         let results: Vec<_> = trials.iter().map(|(n, t)| solve_trial(&ctx, n, t, &cal, 2).expect("solves")).collect();

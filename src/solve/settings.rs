@@ -120,9 +120,10 @@ pub struct SolverSettings {
     /// Standard deviation of a landmark's (anatomical marker's) offset about the model's (m),
     /// weighed like the scale priors: one standard deviation costs what `prior_fraction ×
     /// (calibration frames)` frames with one marker missed by `prior_noise_sd_m` cost, so landmarks
-    /// stay within millimetres however many frames calibration uses. Default 0.003. (A prior of
-    /// one frame's weight washed out: 96 frames moved knee and ASIS markers by 20–40 mm and bent
-    /// the joints to buy marker fit.)
+    /// stay within millimetres however many frames calibration uses. Default 0.004 (measured in
+    /// docs/CALIBRATION.md against AddBiomechanics' IK, Vicon's Plug-in Gait angles and synthetic
+    /// truth: 3, 4 and 6 mm; 4 mm was best or equal on all three). A prior of one frame's weight
+    /// washed out: 96 frames moved knee and ASIS markers by 20–40 mm and bent the joints.
     pub registration_anatomical_sd_m: f64,
     /// Standard deviation of a tracking marker's offset about the model's (m). Default 0.1.
     pub registration_tracking_sd_m: f64,
@@ -199,7 +200,7 @@ impl Default for SolverSettings {
             presolve_sweeps: 2,
             calibration_frames_motion: 96,
             registration: true,
-            registration_anatomical_sd_m: 0.003,
+            registration_anatomical_sd_m: 0.004,
             registration_tracking_sd_m: 0.1,
             registration_bound_m: 0.35,
             prior_noise_sd_m: 0.01,
