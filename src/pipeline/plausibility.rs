@@ -265,3 +265,50 @@ pub fn static_posture(ctx: &Context, frames: &[Vec<f64>]) -> StaticPostureReport
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn with(ctx: &Context, name: &str, deg: f64) -> Vec<f64> {
+        let mut p = ctx.proxy.default_proxies();
+        let k = ctx.proxy.proxies.iter().position(|x| x.name == name).expect("proxy");
+        p[k] = deg.to_radians();
+        p
+    }
+
+    #[test]
+    fn a_half_turn_between_neighbouring_frames_is_a_flip_and_a_wrap_is_not() {
+        let ctx = Context::shipped().expect("shipped");
+        let mut check = PoseCheck::new(&ctx);
+        for (f, deg) in [0.0, 10.0, 20.0, 150.0, 160.0].iter().enumerate() {
+            check.frame(f, &with(&ctx, "hip_rotation_r", *deg), true);
+        }
+        let p = check.finish();
+        assert_eq!(p.suspect.len(), 1, "{p:?}");
+        assert!(p.suspect[0].contains("hip_rotation_r") && p.suspect[0].contains("frame 3"), "{:?}", p.suspect);
+        // The heading crossing ±180° is no jump.
+        let mut check = PoseCheck::new(&ctx);
+        for (f, deg) in [170.0, 179.0, -179.0, -170.0].iter().enumerate() {
+            check.frame(f, &with(&ctx, "pelvis_rotation", *deg), true);
+        }
+        let p = check.finish();
+        assert!(p.suspect.is_empty() && p.findings.is_empty(), "{p:?}");
+        let r = p.coordinates.iter().find(|c| c.name == "pelvis_rotation").expect("moved");
+        assert!((r.largest_jump - 9.0).abs() < 1e-9, "{r:?}");
+    }
+
+    #[test]
+    fn a_standing_knee_bent_beyond_ten_degrees_is_suspect_and_asymmetry_is_reported() {
+        let ctx = Context::shipped().expect("shipped");
+        let straight = with(&ctx, "knee_angle_r", 3.0);
+        assert!(static_posture(&ctx, &[straight]).suspect.is_empty());
+        let bent = with(&ctx, "knee_angle_r", 18.0);
+        let s = static_posture(&ctx, &[bent.clone(), bent]);
+        assert_eq!(s.frames, 2);
+        assert!(s.suspect.iter().any(|w| w.contains("knee_angle_r is 18.0°")), "{:?}", s.suspect);
+        assert!(s.suspect.iter().any(|w| w.contains("knee_angle differs by -18.0°")), "{:?}", s.suspect);
+        let knee = s.asymmetry.iter().find(|a| a.coordinate == "knee_angle").expect("pair");
+        assert!((knee.difference + 18.0).abs() < 1e-9);
+    }
+}
