@@ -127,7 +127,13 @@ fn plug_in_gait_waveforms_agree_and_standing_is_offset_as_walking() {
         assert!(k.rmse_centred <= 2.5, "{}: waveform {:.2}° from Vicon's", k.name, k.rmse_centred);
         // One model definition cannot bend a standing joint more than a walking one.
         let s = stat.get(&k.name).expect("static");
-        assert!((s.offset - k.offset).abs() <= 3.0, "{}: static {:+.1}° against gait {:+.1}°", k.name, s.offset, k.offset);
+        assert!(
+            (s.offset - k.offset).abs() <= 3.0,
+            "{}: static {:+.1}° against gait {:+.1}°",
+            k.name,
+            s.offset,
+            k.offset
+        );
     }
     for c in ["hip_flexion", "knee_angle"] {
         let (r, l) = (gait.get(&format!("{c}_r")).unwrap().offset, gait.get(&format!("{c}_l")).unwrap().offset);
@@ -185,7 +191,8 @@ fn opensim_workflows_agree_with_opensims_own_scale_and_ik() {
         let (cal, placed) = calibrate_placed_with(&sub.ctx, &[("static", &ts)], &[("walk", &tm)]).expect("calibrates");
         let ctx = placed.unwrap_or(sub.ctx.clone());
         let r = solve_trial(&ctx, name, &tm, &cal, 2).expect("solves");
-        let c = core(&motion(&ctx, &r, &tm, name), &reference(&shared(&format!("reference/opensim-4.6/{reference_mot}"))));
+        let c =
+            core(&motion(&ctx, &r, &tm, name), &reference(&shared(&format!("reference/opensim-4.6/{reference_mot}"))));
         eprintln!("{name}: mean core RMSE {:.2}° against OpenSim's Scale + IK", mean_rmse(&c));
         assert!(mean_rmse(&c) <= 2.0, "{name}: {:.2}°", mean_rmse(&c));
     }

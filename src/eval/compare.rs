@@ -212,7 +212,8 @@ pub fn compare(ours: &Motion, reference: &Motion, opt: &CompareOptions) -> Resul
         .filter(|r| wanted(&r.name) && ours.get(&r.name).is_none())
         .map(|r| r.name.clone())
         .collect();
-    missing_in_ours.extend(opt.coordinates.iter().filter(|c| ours.get(c).is_none() && reference.get(c).is_none()).cloned());
+    missing_in_ours
+        .extend(opt.coordinates.iter().filter(|c| ours.get(c).is_none() && reference.get(c).is_none()).cloned());
     if coordinates.is_empty() {
         let names = |m: &Motion| m.series.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", ");
         return Err(CompareError::NothingShared {

@@ -80,9 +80,7 @@ fn without_side(name: &str) -> Vec<String> {
 /// the end for one or more digits).
 fn matches(pattern: &str, name: &str) -> bool {
     if let Some(stem) = pattern.strip_suffix('#') {
-        return name
-            .strip_prefix(stem)
-            .is_some_and(|d| !d.is_empty() && d.chars().all(|c| c.is_ascii_digit()));
+        return name.strip_prefix(stem).is_some_and(|d| !d.is_empty() && d.chars().all(|c| c.is_ascii_digit()));
     }
     match (pattern.strip_prefix('*'), pattern.strip_suffix('*')) {
         (Some(tail), _) => name.ends_with(tail),
@@ -107,10 +105,7 @@ impl RoleTable {
     /// entry matches (as written first, then without its side).
     pub fn role_of(&self, name: &str) -> Option<(MarkerRole, &str)> {
         let find = |n: &str| {
-            self.entries
-                .iter()
-                .find(|e| e.names.iter().any(|p| matches(p, n)))
-                .map(|e| (e.role, e.what.as_str()))
+            self.entries.iter().find(|e| e.names.iter().any(|p| matches(p, n))).map(|e| (e.role, e.what.as_str()))
         };
         find(&normalise(name)).or_else(|| without_side(name).iter().find_map(|n| find(n)))
     }

@@ -23,7 +23,8 @@ use crate::model::MarkerClass;
 use crate::solve::calibrate::{finish, initial_state_weighted, JointProblem, Tracker};
 use crate::solve::placement::place_markers;
 use crate::solve::prior::{
-    measure, Anisotropy, Anthropometric, GlobalTerm, LandmarkAnchor, OffsetPrior, PriorReport, ScaleReport, ScaleToward, StaticPosture,
+    measure, Anisotropy, Anthropometric, GlobalTerm, LandmarkAnchor, OffsetPrior, PriorReport, ScaleReport,
+    ScaleToward, StaticPosture,
 };
 use crate::solve::{make_qp, Calibration, FrameSolver};
 use nalgebra::{DVector, Vector3};
@@ -371,9 +372,7 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     let place_poses: Vec<Vec<f64>> = place_on.iter().map(|&i| state.poses[i].clone()).collect();
     // Markers some calibration frame observes with a weight: those registration can move.
     let seen: Vec<bool> = (0..nm)
-        .map(|m| {
-            slices.iter().zip(&w_all).any(|(f, w)| w[m] > 0.0 && f[3 * m..3 * m + 3].iter().all(|v| !v.is_nan()))
-        })
+        .map(|m| slices.iter().zip(&w_all).any(|(f, w)| w[m] > 0.0 && f[3 * m..3 * m + 3].iter().all(|v| !v.is_nan())))
         .collect();
     if registering {
         // Stage 2: tracking markers start where the stage-1 poses saw them.
@@ -385,7 +384,8 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
                 state.offsets[m] = p.zip_map(&generic[m], |v, g| v.clamp(g - b, g + b));
             }
         }
-        let (offset_prior, anchor) = registration_priors(ctx, &classes, &generic, settings.prior_noise_sd_m, slices.len(), &seen);
+        let (offset_prior, anchor) =
+            registration_priors(ctx, &classes, &generic, settings.prior_noise_sd_m, slices.len(), &seen);
         let mut all_terms = terms.clone();
         all_terms.push(&offset_prior);
         all_terms.push(&anchor);
@@ -405,6 +405,8 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     cal.static_frames = kinds.iter().filter(|k| **k == Kind::Static).count();
     cal.posture = super::plausibility::static_posture(ctx, &cal.frame_proxies[..cal.static_frames]);
     cal.registration_report = registration_report(ctx, &cal);
+    cal.functional_centres =
+        super::joint_centres::functional_centres(&ctx.model, &ctx.proxy, &slices, &cal.frame_proxies);
     let report = prior_report(ctx, &pri, &scale, &cal);
     if let Some(h) = report.stature_m.filter(|h| !(0.5..=2.6).contains(h)) {
         let trial = statics.iter().chain(motions).map(|(n, _)| *n).collect::<Vec<_>>().join(", ");
@@ -478,7 +480,12 @@ fn registration_report(ctx: &Context, cal: &Calibration) -> crate::solve::prior:
         .filter(|((m, o), _)| (*o - m.offset).norm() > 0.0)
         .map(|((m, o), (class, class_from))| {
             let s = Vector3::from_fn(|a, _| y[model.scale_index(m.body, a)]);
-            MarkerMove { marker: m.name.clone(), class, class_from, moved_mm: (o - m.offset).component_mul(&s).norm() * 1e3 }
+            MarkerMove {
+                marker: m.name.clone(),
+                class,
+                class_from,
+                moved_mm: (o - m.offset).component_mul(&s).norm() * 1e3,
+            }
         })
         .collect();
     moves.sort_by(|a, b| b.moved_mm.total_cmp(&a.moved_mm));
@@ -533,10 +540,7 @@ fn registration_priors(
         })
         .collect();
     let anchored: Vec<bool> = (0..model.markers.len()).map(|m| seen[m] && free_body[model.markers[m].body]).collect();
-    (
-        OffsetPrior { reference: generic.to_vec(), weight },
-        LandmarkAnchor::new(model, generic, &anchored, anatomical),
-    )
+    (OffsetPrior { reference: generic.to_vec(), weight }, LandmarkAnchor::new(model, generic, &anchored, anatomical))
 }
 
 /// Fails a trial whose marker cloud is far larger or smaller than the model's: the data's

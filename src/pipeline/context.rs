@@ -257,7 +257,10 @@ impl Context {
         let mut static_posture_values = Vec::new();
         for t in &setup.static_coordinate_tasks {
             let Some(j) = self.model.coordinate_index(&t.name) else {
-                warnings.push(format!("{setup_name}: line {}: coordinate task for '{}', which the model lacks; skipped", t.line, t.name));
+                warnings.push(format!(
+                    "{setup_name}: line {}: coordinate task for '{}', which the model lacks; skipped",
+                    t.line, t.name
+                ));
                 continue;
             };
             let value = match t.value {
@@ -273,7 +276,16 @@ impl Context {
         let mut subject = self.subject;
         subject.height_m = subject.height_m.or(setup.height_m);
         subject.mass_kg = subject.mass_kg.or(setup.mass_kg);
-        Ok(Context { profile, proxy, settings, calibration_weights, warnings, subject, static_posture_values, ..self.clone() })
+        Ok(Context {
+            profile,
+            proxy,
+            settings,
+            calibration_weights,
+            warnings,
+            subject,
+            static_posture_values,
+            ..self.clone()
+        })
     }
 
     /// Tracking arrays (length ny) holding only the coordinate targets: `(reference, weights)`.

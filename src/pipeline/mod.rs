@@ -9,6 +9,7 @@ pub mod device;
 pub mod export;
 pub mod frames;
 pub mod ik_tasks;
+pub mod joint_centres;
 pub mod lanes;
 pub mod matching;
 pub mod plausibility;

@@ -193,10 +193,8 @@ impl PoseCheck {
                     r.name, r.largest_jump, r.largest_jump_frame
                 ));
             } else if r.largest_jump > JUMP_WARN_DEG {
-                out.findings.push(format!(
-                    "{} changes by {:.0}° into frame {}",
-                    r.name, r.largest_jump, r.largest_jump_frame
-                ));
+                out.findings
+                    .push(format!("{} changes by {:.0}° into frame {}", r.name, r.largest_jump, r.largest_jump_frame));
             }
             if r.frames_at_limit as f64 > AT_LIMIT_WARN_FRACTION * self.frames as f64 {
                 out.findings.push(format!(

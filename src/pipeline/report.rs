@@ -127,6 +127,9 @@ pub struct CalibrationReport {
     /// Each registered marker's move with its class and why it has it; landmarks moved too far.
     #[serde(default)]
     pub registration: crate::solve::prior::RegistrationReport,
+    /// The root's joints (the hips) from the motion against the calibrated model's.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub functional_centres: Vec<crate::solve::prior::FunctionalCentre>,
     /// The static trial's posture (mean angles of its calibration frames), when there was one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub static_posture: Option<crate::solve::prior::StaticPostureReport>,
@@ -176,6 +179,7 @@ impl CalibrationReport {
             marker_moves_mm: moves,
             prior: cal.prior.clone(),
             registration: cal.registration_report.clone(),
+            functional_centres: cal.functional_centres.clone(),
             static_posture: (cal.static_frames > 0).then(|| cal.posture.clone()),
         }
     }

@@ -62,6 +62,9 @@ pub struct Calibration {
     /// Each marker's move by registration or placement, and the landmarks moved too far.
     #[serde(default)]
     pub registration_report: super::prior::RegistrationReport,
+    /// The root's joints (the hips) found from the motion against the calibrated model's.
+    #[serde(default)]
+    pub functional_centres: Vec<super::prior::FunctionalCentre>,
 }
 
 impl Calibration {
@@ -92,6 +95,12 @@ impl Calibration {
             out.push(format!("scale {} = {:.3} is {:.1} standard deviations from {of}", s.name, s.value, s.z));
         }
         out.extend(self.registration_report.warnings.iter().cloned());
+        for c in self.functional_centres.iter().filter(|c| c.distance_mm > 30.0) {
+            out.push(format!(
+                "{}'s joint centre from the motion is {:.0} mm from the calibrated model's",
+                c.body, c.distance_mm
+            ));
+        }
         out
     }
 }
@@ -497,6 +506,7 @@ pub fn finish(
         static_frames: 0,
         posture: Default::default(),
         registration_report: Default::default(),
+        functional_centres: Vec::new(),
     }
 }
 

@@ -475,3 +475,17 @@ pub struct RegistrationReport {
     /// Landmarks moved beyond `registration_suspect_mm`: the calibration is `suspect`.
     pub suspect: Vec<String>,
 }
+
+/// A joint's centre found from the motion against the calibrated model's
+/// ([`crate::pipeline::joint_centres`]).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct FunctionalCentre {
+    /// The body whose joint it is (a child of the root: a femur).
+    pub body: String,
+    /// Distance between the sphere fit's centre and the model's joint centre (mm).
+    pub distance_mm: f64,
+    /// The child's range of motion relative to the root over the frames fitted (deg).
+    pub range_of_motion_deg: f64,
+    /// Marker positions fitted.
+    pub samples: usize,
+}

@@ -12,10 +12,10 @@ use crate::model::proxy::ProxyKind;
 use crate::model::{CoordinateKind, Model};
 use crate::pipeline::Context;
 use crate::synth::{synthesize, SynthOptions};
+use nalgebra::Vector3;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 
@@ -131,7 +131,8 @@ fn unit(rng: &mut ChaCha8Rng, normal: &Normal<f64>) -> [f64; 3] {
 fn long_axes(model: &Model) -> Vec<Vector3<f64>> {
     (0..model.bodies.len())
         .map(|b| {
-            let child = model.bodies.iter().find(|c| c.parent == Some(b)).map(|c| c.joint.parent_offset.translation.vector);
+            let child =
+                model.bodies.iter().find(|c| c.parent == Some(b)).map(|c| c.joint.parent_offset.translation.vector);
             let markers: Vec<Vector3<f64>> = model.markers.iter().filter(|m| m.body == b).map(|m| m.offset).collect();
             let centroid = (!markers.is_empty()).then(|| markers.iter().sum::<Vector3<f64>>() / markers.len() as f64);
             child
@@ -165,7 +166,8 @@ pub fn subject(ctx: &Context, spec: &SubjectSpec, seed: u64, index: usize) -> Sy
     let axes = long_axes(model);
     let misplace: Vec<[f64; 3]> = (0..nm)
         .map(|m| {
-            let range = if tracking[m] { spec.tracking_misplace_mm.unwrap_or(spec.misplace_mm) } else { spec.misplace_mm };
+            let range =
+                if tracking[m] { spec.tracking_misplace_mm.unwrap_or(spec.misplace_mm) } else { spec.misplace_mm };
             let n = rng.random_range(range.0..=range.1) * 1e-3;
             let mut d = Vector3::from(unit(&mut rng, &normal));
             let o = model.markers[m].offset;
@@ -223,8 +225,10 @@ pub fn subject(ctx: &Context, spec: &SubjectSpec, seed: u64, index: usize) -> Sy
                     let px = &proxy.proxies[k];
                     match px.kind {
                         ProxyKind::Scale => p_motion0[k],
-                        ProxyKind::Rotation => (default[k] + stance[k] + 0.01 * (TAU * sway[k].0 * t + sway[k].1).sin())
-                            .clamp(px.range.0, px.range.1),
+                        ProxyKind::Rotation => {
+                            (default[k] + stance[k] + 0.01 * (TAU * sway[k].0 * t + sway[k].1).sin())
+                                .clamp(px.range.0, px.range.1)
+                        }
                         ProxyKind::Translation => default[k],
                     }
                 })

@@ -89,9 +89,10 @@ impl AngleMap {
 
     /// The shipped map called `name` ([`SHIPPED_MAPS`]).
     pub fn shipped(name: &str) -> Option<AngleMap> {
-        SHIPPED_MAPS.iter().find(|(n, _)| *n == name).map(|(n, text)| {
-            AngleMap::parse(text, &format!("models/compare/{n}.toml")).expect("shipped maps parse")
-        })
+        SHIPPED_MAPS
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(n, text)| AngleMap::parse(text, &format!("models/compare/{n}.toml")).expect("shipped maps parse"))
     }
 }
 
@@ -119,9 +120,8 @@ pub fn load_motion(path: &Path, map: Option<&AngleMap>) -> Result<Motion, LoadEr
 
 /// The coordinates of an OpenSim table (`time` first or anywhere).
 pub fn motion_from_table(t: &crate::io::sto::Table, file: &str) -> Result<Motion, LoadError> {
-    let time = t
-        .column("time")
-        .ok_or_else(|| LoadError::NoTime { file: file.into(), columns: t.columns.join(", ") })?;
+    let time =
+        t.column("time").ok_or_else(|| LoadError::NoTime { file: file.into(), columns: t.columns.join(", ") })?;
     // OpenSim writes `inDegrees=yes` for IK results; a table that does not say is taken as
     // degrees, as OpenSim's own readers do.
     let to_deg = if t.in_degrees() == Some(false) { 180.0 / std::f64::consts::PI } else { 1.0 };
@@ -201,7 +201,8 @@ mod tests {
 
     #[test]
     fn a_map_with_a_fourth_component_is_refused_with_its_coordinate() {
-        let e = AngleMap::parse("[[angle]]\ncoordinate = \"k\"\npoints = [\"K\"]\ncomponent = 3\n", "m.toml").unwrap_err();
+        let e =
+            AngleMap::parse("[[angle]]\ncoordinate = \"k\"\npoints = [\"K\"]\ncomponent = 3\n", "m.toml").unwrap_err();
         assert!(e.to_string().contains("k: component 3"), "{e}");
     }
 

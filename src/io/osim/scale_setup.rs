@@ -95,7 +95,8 @@ pub fn parse_scale_setup(text: &str, file_name: &str, base: &Path) -> Result<Sca
         for t in tasks.marker_tasks {
             out.static_weights.insert(t.name, if t.apply { t.weight } else { 0.0 });
         }
-        out.static_coordinate_tasks = tasks.coordinate_tasks.into_iter().filter(|t| t.apply && t.weight > 0.0).collect();
+        out.static_coordinate_tasks =
+            tasks.coordinate_tasks.into_iter().filter(|t| t.apply && t.weight > 0.0).collect();
     }
     Ok(out)
 }

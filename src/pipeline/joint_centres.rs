@@ -1,0 +1,127 @@
+//! Joint centres from the motion, as a check of the calibrated model: for each hip (a joint of the
+//! root body to a femur or thigh), the point about which the child body's markers turn, found by a sphere fit of
+//! their positions in the root's frame over the calibration frames (one centre, a radius per
+//! marker: `‖x − c‖² = ρ_m²`, linear in `c` and `ρ_m² − ‖c‖²`), against the model's joint centre
+//! at the calibrated scales. The joint calibration already places the hips where the markers turn
+//! about them; a functional centre far from the model's says that the model cannot (a pelvis
+//! scaled wrongly, a mislabelled thigh marker) and is reported.
+
+use crate::kinematics::cpu::{forward, Workspace};
+use crate::model::proxy::ProxyMap;
+use crate::model::Model;
+use crate::solve::prior::FunctionalCentre;
+use nalgebra::{DMatrix, DVector, Vector3};
+
+/// Below this range of motion of the child relative to the root (deg), a sphere fit is not
+/// determined and none is reported.
+pub const MIN_ROM_DEG: f64 = 20.0;
+/// A functional centre further than this from the model's (mm) is a warning.
+pub const WARN_MM: f64 = 30.0;
+
+/// The functional centres of the root body's joints over `frames` (observed markers per frame,
+/// `3·marker + axis`, NaN gaps) at the proxies `poses` of each frame.
+pub fn functional_centres(
+    model: &Model,
+    proxy: &ProxyMap,
+    frames: &[&[f64]],
+    poses: &[Vec<f64>],
+) -> Vec<FunctionalCentre> {
+    let Some(root) = model.bodies.iter().position(|b| b.parent.is_none()) else { return Vec::new() };
+    // The hips: the root's joints to a femur or thigh (the trunk bends along its spine, not
+    // about one point, and is left out).
+    let hip = |b: usize| {
+        let (body, joint) =
+            (model.bodies[b].name.to_ascii_lowercase(), model.bodies[b].joint.name.to_ascii_lowercase());
+        body.contains("femur") || body.contains("thigh") || joint.contains("hip")
+    };
+    let children: Vec<usize> =
+        (0..model.bodies.len()).filter(|&b| model.bodies[b].parent == Some(root) && hip(b)).collect();
+    let mut ws = Workspace::new(model);
+    // Per child: its markers' positions in the root frame, the model's centre, the child's
+    // orientation relative to the root, per frame.
+    let mut samples: Vec<Vec<(usize, Vector3<f64>)>> = vec![Vec::new(); children.len()];
+    let mut model_centre: Vec<Option<Vector3<f64>>> = vec![None; children.len()];
+    let mut orientations: Vec<Vec<nalgebra::Matrix3<f64>>> = vec![Vec::new(); children.len()];
+    for (obs, p) in frames.iter().zip(poses) {
+        let y = proxy.state(p);
+        forward(model, &y, &mut ws);
+        let (r, t) = (ws.body_rot[root], ws.body_pos[root]);
+        for (i, &c) in children.iter().enumerate() {
+            model_centre[i].get_or_insert_with(|| r.transpose() * (ws.body_pos[c] - t));
+            orientations[i].push(r.transpose() * ws.body_rot[c]);
+            for m in (0..model.markers.len()).filter(|&m| model.markers[m].body == c) {
+                let x = Vector3::new(obs[3 * m], obs[3 * m + 1], obs[3 * m + 2]);
+                if x.iter().all(|v| v.is_finite()) {
+                    samples[i].push((m, r.transpose() * (x - t)));
+                }
+            }
+        }
+    }
+    let mut out = Vec::new();
+    for (i, &c) in children.iter().enumerate() {
+        let rom = range_of_motion_deg(&orientations[i]);
+        let (Some(centre), true) = (model_centre[i], rom >= MIN_ROM_DEG) else { continue };
+        let Some(fit) = sphere_centre(&samples[i]) else { continue };
+        out.push(FunctionalCentre {
+            body: model.bodies[c].name.clone(),
+            distance_mm: (fit - centre).norm() * 1e3,
+            range_of_motion_deg: rom,
+            samples: samples[i].len(),
+        });
+    }
+    out
+}
+
+/// The largest rotation between any orientation and their first (deg).
+fn range_of_motion_deg(r: &[nalgebra::Matrix3<f64>]) -> f64 {
+    let Some(first) = r.first() else { return 0.0 };
+    r.iter()
+        .map(|m| {
+            let c = ((first.transpose() * m).trace() - 1.0) / 2.0;
+            c.clamp(-1.0, 1.0).acos().to_degrees()
+        })
+        .fold(0.0, f64::max)
+}
+
+/// The least-squares centre of spheres through each marker's points (one radius per marker);
+/// `None` when the points do not determine it.
+fn sphere_centre(samples: &[(usize, Vector3<f64>)]) -> Option<Vector3<f64>> {
+    let mut markers: Vec<usize> = samples.iter().map(|s| s.0).collect();
+    markers.sort_unstable();
+    markers.dedup();
+    let n = 3 + markers.len();
+    if samples.len() < n + 3 {
+        return None;
+    }
+    // ‖x‖² = 2 cᵀx + k_m: unknowns (c, k_1 … k_M).
+    let mut a = DMatrix::zeros(samples.len(), n);
+    let mut b = DVector::zeros(samples.len());
+    for (row, (m, x)) in samples.iter().enumerate() {
+        for k in 0..3 {
+            a[(row, k)] = 2.0 * x[k];
+        }
+        a[(row, 3 + markers.binary_search(m).ok()?)] = 1.0;
+        b[row] = x.norm_squared();
+    }
+    let sol = a.svd(true, true).solve(&b, 1e-9).ok()?;
+    Some(Vector3::new(sol[0], sol[1], sol[2])).filter(|c| c.iter().all(|v| v.is_finite()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn points_turning_about_a_centre_give_that_centre() {
+        let c = Vector3::new(0.1, -0.08, 0.02);
+        let mut s = Vec::new();
+        for (m, r) in [(0usize, 0.2), (1, 0.35)] {
+            for k in 0..40 {
+                let (a, b) = (k as f64 * 0.11, k as f64 * 0.07 + 0.3 * m as f64);
+                s.push((m, c + r * Vector3::new(a.sin() * b.cos(), a.sin() * b.sin(), -a.cos())));
+            }
+        }
+        let fit = sphere_centre(&s).expect("determined");
+        assert!((fit - c).norm() < 1e-9, "{fit:?}");
+    }
+}
