@@ -25,6 +25,9 @@ pub enum MarkerFileError {
     C3d(#[from] c3d::C3dError),
     #[error("{path}: unsupported marker file type '{extension}' (supported: {supported})")]
     Unsupported { path: String, extension: String, supported: &'static str },
+    /// Marker positions given in memory ([`markers_from_arrays`]) that do not make a trial.
+    #[error("markers from arrays: {0}")]
+    Arrays(String),
 }
 
 /// Marker file formats understood by [`read_markers`], by extension.
@@ -42,6 +45,44 @@ pub fn read_markers(path: &Path) -> Result<MarkerTrial, MarkerFileError> {
             supported: MARKER_FORMATS,
         })?,
     };
+    mask_absurd(&mut t);
+    Ok(t)
+}
+
+/// A marker trial from positions held in memory rather than read from a file: `xyz` frame-major
+/// (`frames × labels × 3`, as [`MarkerTrial::positions`]) in `units` (`mm`, `cm`, `m`, `in`), NaN
+/// for gaps; frame times `times` (s; `i / rate_hz` when `None`), frame numbers from 1. The numbers
+/// are brought into metres, and absurd ones masked, as [`read_markers`] does with a file's.
+pub fn markers_from_arrays(
+    labels: Vec<String>,
+    xyz: &[f64],
+    rate_hz: f64,
+    units: &str,
+    times: Option<Vec<f64>>,
+) -> Result<MarkerTrial, MarkerFileError> {
+    let bad = |m: String| MarkerFileError::Arrays(m);
+    let scale = markers::units_to_metres(units)
+        .ok_or_else(|| bad(format!("unknown units {units:?} (expected mm, cm, m or in)")))?;
+    let per_m = markers::per_metre(scale);
+    let width = labels.len() * 3;
+    if width == 0 || !xyz.len().is_multiple_of(width) {
+        return Err(bad(format!("{} values are not frames of {} markers x 3", xyz.len(), labels.len())));
+    }
+    let n = xyz.len() / width;
+    if !(rate_hz.is_finite() && rate_hz > 0.0) {
+        return Err(bad(format!("sampling rate {rate_hz} Hz is not positive")));
+    }
+    let times = times.unwrap_or_else(|| (0..n).map(|i| i as f64 / rate_hz).collect());
+    let mut t = MarkerTrial {
+        labels,
+        rate_hz,
+        times,
+        frame_numbers: (1..=n as i64).collect(),
+        positions: xyz.iter().map(|v| v / per_m).collect(),
+        source_units: units.trim().to_string(),
+        warnings: Vec::new(),
+    };
+    t.check_consistent().map_err(bad)?;
     mask_absurd(&mut t);
     Ok(t)
 }

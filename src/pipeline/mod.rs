@@ -12,6 +12,7 @@ pub mod ik_tasks;
 pub mod lanes;
 pub mod matching;
 pub mod report;
+pub mod session;
 pub mod stats;
 pub mod stream;
 pub mod subject;
