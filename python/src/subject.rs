@@ -189,8 +189,10 @@ impl Subject {
         let (warnings, set) = py
             .detach(|| smocap::pipeline::export::write_scaled_model(&cal.ctx, &cal.calibration, model, &path))
             .map_err(to_py::<ModelError>)?;
+        // Notes, as the command line prints them (`note: ...`): to the `smocap` logger.
+        let log = py.import("logging")?.call_method1("getLogger", ("smocap",))?;
         for w in warnings {
-            warn(py, &w)?;
+            log.call_method1("info", (w,))?;
         }
         Ok(set)
     }
