@@ -18,7 +18,7 @@ def _cli():
     """The smocap binary: SMOCAP_BIN, else the one cargo built in this checkout's target dir."""
     env = os.environ.get("SMOCAP_BIN")
     if env:
-        return Path(env)
+        return Path(env).resolve()
     target = Path(os.environ.get("CARGO_TARGET_DIR", REPO / "target"))
     for profile in ("debug", "release"):
         p = target / profile / "smocap"

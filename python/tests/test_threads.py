@@ -31,8 +31,8 @@ def test_two_threads_solving_at_once_give_the_serial_results(synthetic, long_syn
         assert np.array_equal(got.to_numpy(), want.to_numpy()) and list(got.columns) == list(want.columns)
 
 
-def test_python_runs_while_a_trial_is_solved(synthetic):
-    subject = smocap.calibrate(None, [synthetic])
+def test_python_runs_while_a_trial_is_solved(long_synthetic):
+    subject = smocap.calibrate(None, [long_synthetic])
     started, stop = threading.Event(), threading.Event()
     spans = []
 
@@ -40,7 +40,7 @@ def test_python_runs_while_a_trial_is_solved(synthetic):
         started.set()
         while not stop.is_set():
             t0 = time.perf_counter()
-            subject.solve(synthetic, threads=1)
+            subject.solve(long_synthetic, threads=1)
             spans.append((t0, time.perf_counter()))
 
     worker = threading.Thread(target=solve)
