@@ -1,16 +1,36 @@
 """Type stubs of smocap's Python API (the binding is the compiled module ``smocap._smocap``)."""
 
 import os
-from typing import Any, Callable, Dict, Iterable, List, Optional, Union
+import pathlib
+from typing import Any, Callable, Dict, Iterable, List, Optional, Union, final
 
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
 __version__: str
+__all__ = [
+    "ArchiveError",
+    "CalibrationError",
+    "MarkerFileError",
+    "Markers",
+    "Model",
+    "ModelError",
+    "Motion",
+    "SmocapError",
+    "SmocapWarning",
+    "SolveError",
+    "Subject",
+    "Trial",
+    "__version__",
+    "calibrate",
+    "convert",
+    "read_markers",
+    "read_trial",
+]
 
-PathLike = Union[str, "os.PathLike[str]"]
-TrialInput = Union[PathLike, "Markers"]
+_PathLike = Union[str, "os.PathLike[str]"]
+_TrialInput = Union[_PathLike, "Markers"]
 
 class SmocapError(Exception):
     """An error from smocap; the message is the one the command line prints (file, line, what
@@ -37,6 +57,7 @@ class SmocapWarning(UserWarning):
     """A result not to be trusted as it is: a ``suspect`` calibration or trial (scales at their
     bounds, most frames at the iteration cap)."""
 
+@final
 class Markers:
     """Marker trajectories of one trial, in the file's lab frame and units.
 
@@ -46,8 +67,8 @@ class Markers:
     (``'x'``, ``'y'``, ``'z'``; detected when solving if ``None``).
     """
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         labels: List[str],
         xyz: npt.ArrayLike,
         rate_hz: float,
@@ -55,7 +76,7 @@ class Markers:
         up: Optional[str] = None,
         times: Optional[npt.ArrayLike] = None,
         name: Optional[str] = None,
-    ) -> None: ...
+    ) -> "Markers": ...
     @property
     def labels(self) -> List[str]:
         """Marker labels, as in the file."""
@@ -85,7 +106,7 @@ class Markers:
         """The file path, or the name given."""
     def __len__(self) -> int: ...
 
-def read_markers(path: PathLike, units: Optional[str] = None, up: Optional[str] = None) -> Markers:
+def read_markers(path: _PathLike, units: Optional[str] = None, up: Optional[str] = None) -> Markers:
     """Reads a marker file (TRC or C3D, by extension).
 
     ``units`` (``'mm'``, ``'cm'``, ``'m'``) overrides the file header's, ``up`` (``'x'``,
@@ -93,21 +114,22 @@ def read_markers(path: PathLike, units: Optional[str] = None, up: Optional[str] 
     when the markers are solved. Raises :class:`MarkerFileError`.
     """
 
+@final
 class Model:
     """A model with its marker set, solver profile and OpenSim setups (as ``smocap solve``'s
     ``--model``, ``--markerset``, ``--profile``, ``--scale-setup``, ``--ik-setup``); the shipped
     full-body model when ``path`` is ``None``. Raises :class:`ModelError`."""
 
-    def __init__(
-        self,
-        path: Optional[PathLike] = None,
-        markerset: Optional[PathLike] = None,
-        profile: Optional[PathLike] = None,
-        scale_setup: Optional[PathLike] = None,
-        ik_setup: Optional[PathLike] = None,
-    ) -> None: ...
+    def __new__(
+        cls,
+        path: Optional[_PathLike] = None,
+        markerset: Optional[_PathLike] = None,
+        profile: Optional[_PathLike] = None,
+        scale_setup: Optional[_PathLike] = None,
+        ik_setup: Optional[_PathLike] = None,
+    ) -> "Model": ...
     @property
-    def path(self) -> Optional[str]:
+    def path(self) -> Optional[pathlib.Path]:
         """The model file (``None``: the shipped model)."""
     @property
     def coordinates(self) -> List[str]:
@@ -127,8 +149,8 @@ class Model:
 
 def calibrate(
     model: Optional[Model],
-    trials: Union[TrialInput, Iterable[TrialInput]],
-    static: Optional[TrialInput] = None,
+    trials: Union[_TrialInput, Iterable[_TrialInput]],
+    static: Optional[_TrialInput] = None,
     height: Optional[float] = None,
     mass: Optional[float] = None,
     sex: Optional[str] = None,
@@ -148,6 +170,7 @@ def calibrate(
     :class:`ModelError`, :class:`MarkerFileError`.
     """
 
+@final
 class Subject:
     """A calibrated subject: scale factors, registered markers, calibration report."""
 
@@ -172,12 +195,12 @@ class Subject:
     @property
     def coordinates(self) -> List[str]:
         """Coordinate names in model order."""
-    def write_osim(self, path: PathLike) -> str:
+    def write_osim(self, path: _PathLike) -> pathlib.Path:
         """Writes the scaled OpenSim model and its scale set beside it (``<stem>.scaleset.xml``),
         as ``smocap solve --scaled-model``; returns the scale set's path."""
     def solve(
         self,
-        trial: TrialInput,
+        trial: _TrialInput,
         threads: Optional[int] = None,
         backend: str = "cpu",
         lanes: Optional[int] = None,
@@ -190,6 +213,7 @@ class Subject:
         (:class:`SmocapWarning`); a trial with no result raises :class:`SolveError`.
         """
 
+@final
 class Motion:
     """A solved trial."""
 
@@ -215,13 +239,14 @@ class Motion:
     @property
     def notes(self) -> List[str]:
         """Bridged frames, pre-solved outliers, why it is suspect."""
-    def to_mot(self, path: PathLike) -> None:
+    def to_mot(self, path: _PathLike) -> None:
         """Writes OpenSim's ``.mot``, byte for byte as ``smocap solve --mot-dir`` does."""
     def __len__(self) -> int: ...
 
-def read_trial(path: PathLike) -> "Trial":
+def read_trial(path: _PathLike) -> "Trial":
     """Reads a trial converted by ``smocap convert`` (``.mcap``). Raises :class:`ArchiveError`."""
 
+@final
 class Trial:
     """A converted trial read back."""
 
@@ -245,13 +270,13 @@ class Trial:
     @property
     def subject(self) -> Dict[str, Any]:
         """Names (coordinates, bodies, markers, ...) and calibrated ``scales`` by body."""
-    def to_mot(self, path: PathLike) -> None:
+    def to_mot(self, path: _PathLike) -> None:
         """Writes OpenSim's ``.mot`` as ``smocap export --mot`` does."""
     def __len__(self) -> int: ...
 
 def convert(
-    config: PathLike,
-    out: PathLike = "smocap-out",
+    config: _PathLike,
+    out: _PathLike,
     jobs: Optional[int] = None,
     resume: bool = False,
     shard: Optional[str] = None,

@@ -53,7 +53,7 @@ impl Reporter {
 
 /// Converts every trial of the datasets in `config` to one MCAP file under `out`.
 #[pyfunction]
-#[pyo3(signature = (config, out = PathBuf::from("smocap-out"), jobs = None, resume = false, shard = None,
+#[pyo3(signature = (config, out, jobs = None, resume = false, shard = None,
     backend = "cpu", progress = None, dataset = None, progress_every = 1.0, lanes = None))]
 #[allow(clippy::too_many_arguments)]
 pub fn convert<'py>(
