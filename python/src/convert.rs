@@ -51,7 +51,14 @@ impl Reporter {
     }
 }
 
-/// Converts every trial of the datasets in `config` to one MCAP file under `out`.
+/// Converts every trial of the datasets in `config` (a `datasets.toml`) to one MCAP file under
+/// `out`, as `smocap convert`; returns the summary (`--report-json`'s content) as a dict.
+///
+/// `shard` is 'I/N' (default: from Slurm/Kubernetes variables, as the command line). `progress`
+/// is called with a dict: `event` ('note', 'trial': a trial's line, 'progress': every
+/// `progress_every` s, 'done'), `line` (the command line's text) and the counters `trials_done`,
+/// `trials_total`, `trials_failed`, `frames_done`, `frames_total`, `elapsed_s`. Failed trials
+/// are listed in the summary with their reason; a run that cannot start raises ArchiveError.
 #[pyfunction]
 #[pyo3(signature = (config, out, jobs = None, resume = false, shard = None,
     backend = "cpu", progress = None, dataset = None, progress_every = 1.0, lanes = None))]

@@ -14,6 +14,11 @@ use std::sync::Arc;
 
 /// Marker trajectories of one trial: labels, rate, frame times and positions (frames × markers
 /// × 3, NaN for gaps), in the file's lab frame and units.
+///
+/// Built by `read_markers`, or from arrays so that data that never was a file can be solved:
+/// `Markers(labels, xyz, rate_hz, units="m")`, `xyz` of shape (frames, markers, 3) with NaN for
+/// gaps; `times` (s) default to `i / rate_hz`; `up` is the data's up axis ('x', 'y', 'z';
+/// detected when solving if None).
 #[pyclass(module = "smocap", frozen)]
 pub struct Markers {
     /// As read: positions in metres, in the file's lab frame (`MarkerTrial`'s convention).
@@ -180,6 +185,10 @@ impl Markers {
 }
 
 /// Reads a marker file (TRC or C3D, by extension).
+///
+/// `units` ('mm', 'cm', 'm') overrides the file header's, `up` ('x', 'y', 'z') gives the data's
+/// up axis (as `smocap solve --units/--up`); both apply when the markers are solved. Raises
+/// MarkerFileError.
 #[pyfunction]
 #[pyo3(signature = (path, units = None, up = None))]
 pub fn read_markers(py: Python<'_>, path: PathBuf, units: Option<&str>, up: Option<&str>) -> PyResult<Markers> {

@@ -82,7 +82,15 @@ fn inputs(trials: &Bound<'_, PyAny>) -> PyResult<Vec<Input>> {
     trials.try_iter()?.map(|t| Input::extract(&t?)).collect()
 }
 
-/// Calibrates a subject from its static trial (when given) and frames of its motion trials.
+/// Calibrates a subject once, from its static trial (when given, or named by the model's Scale
+/// setup) and frames of its motion `trials`, as `smocap solve` does.
+///
+/// Trials are paths (units and up axis from the header / detected) or `Markers`. `height` (m),
+/// `mass` (kg) and `sex` ('male'/'female') condition the anthropometric prior; `register=False`
+/// keeps the model's marker positions; `place_markers` places them on the static trial
+/// (OpenSim's MarkerPlacer); `settings` overrides solver settings (a profile's `[solver]` keys,
+/// as `--set KEY=VALUE`). A suspect calibration warns (SmocapWarning). Raises
+/// CalibrationError, ModelError, MarkerFileError.
 #[pyfunction]
 #[pyo3(signature = (model, trials, r#static = None, height = None, mass = None, sex = None, register = true,
     settings = None, place_markers = false))]
@@ -197,7 +205,12 @@ impl Subject {
         Ok(set)
     }
 
-    /// Solves every frame of `trial` with the calibrated morphology.
+    /// Solves every frame of `trial` (a path or `Markers`) with the calibrated morphology.
+    ///
+    /// `threads` (default: the machine's parallelism) and `lanes` change the speed, never the
+    /// result; `backend` is 'cpu' (the f64 reference), 'wgpu', 'wgpu-f64' or 'auto'. The GIL is
+    /// released while solving. A suspect trial warns (SmocapWarning); a trial with no result
+    /// raises SolveError.
     #[pyo3(signature = (trial, threads = None, backend = "cpu", lanes = None))]
     fn solve(
         &self,

@@ -3,7 +3,7 @@
 
     pip install .                                           # release build of the package
     cargo build --release                                   # the command line to compare against
-    python python/bench.py --smocap target/release/smocap [--frames 10000] [--reps 5]
+    python scripts/bench_python.py --smocap target/release/smocap [--frames 10000] [--reps 5]
 
 1. Per-frame speed: one synthetic trial of `--frames` frames (`smocap synth`, shipped model),
    solved by `smocap solve --threads T` (frames / the report's `solve_wall_s`: calibration and
@@ -82,23 +82,28 @@ def main():
             synth(exe, a.frames // 2, seed, p)
         inputs = [smocap.read_markers(p) for p in half]
         subject2 = smocap.calibrate(None, inputs)
-        serial, parallel = [], []
+        serial, parallel, busy, busy1 = [], [], [], []
         for _ in range(a.reps):
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             for x in inputs:
                 subject2.solve(x, threads=1)
             serial.append(time.perf_counter() - t0)
+            busy1.append((time.process_time() - c0) / serial[-1])
             ts = [threading.Thread(target=subject2.solve, args=(x,), kwargs={"threads": 1}) for x in inputs]
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             for t in ts:
                 t.start()
             for t in ts:
                 t.join()
             parallel.append(time.perf_counter() - t0)
+            busy.append((time.process_time() - c0) / parallel[-1])
         s, p = statistics.median(serial), statistics.median(parallel)
         print(f"two trials of {a.frames // 2} frames, threads=1 each: one after the other {s:.2f} s, two Python "
-              f"threads at once {p:.2f} s, ratio {p / s:.3f} (serial {[round(x, 2) for x in serial]}, "
-              f"parallel {[round(x, 2) for x in parallel]})", flush=True)
+              f"threads at once {p:.2f} s, ratio {p / s:.3f}; cores busy: {statistics.median(busy1):.2f} one after the "
+              f"other, {statistics.median(busy):.2f} at once "
+              f"(serial {[round(x, 2) for x in serial]}, parallel {[round(x, 2) for x in parallel]})", flush=True)
+        c1, c2 = rows[0][1], rows[1][1]
+        print(f"for comparison, the CLI's own speed-up from 1 to 2 threads in this run: {c2 / c1:.2f}", flush=True)
     print(f"load average after: {os.getloadavg()}; cores: {os.cpu_count()}", flush=True)
 
 
