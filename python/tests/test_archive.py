@@ -60,3 +60,19 @@ def test_a_missing_datasets_file_is_an_archive_error(tmp):
         assert "none.toml" in str(e)
     else:
         raise AssertionError("no error")
+
+
+def test_an_exception_in_the_progress_callback_is_raised_after_the_run(tmp):
+    (tmp / "datasets.toml").write_text(DATASETS)
+
+    def progress(event):
+        raise RuntimeError("callback broke")
+
+    try:
+        smocap.convert(tmp / "datasets.toml", tmp / "out", progress=progress)
+    except RuntimeError as e:
+        assert "callback broke" in str(e)
+    else:
+        raise AssertionError("no error")
+    # The run itself went on: both files are there.
+    assert len(list((tmp / "out" / "synthetic").rglob("*.mcap"))) == 2
