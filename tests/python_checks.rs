@@ -2,8 +2,8 @@
 //! readers and `mcap-protobuf-support` decode every message of every channel from the file's own
 //! descriptors; Foxglove's messages match `foxglove-schemas-protobuf` field by field; every
 //! `/tf` is one tree rooted at `world`) on the synthetic archive and both shared OpenSim
-//! datasets, and the README's NumPy/pandas recipe (`scripts/test_load_trial.py`) against
-//! `smocap export --csv`.
+//! datasets. (The README's NumPy/pandas recipe, `scripts/load_trial.py` on the smocap Python
+//! package, is tested by `python/tests/test_load_trial.py`.)
 //!
 //! They run with the Python named by `SMOCAP_PYTHON` (`.ci/run` makes a venv with the pinned
 //! packages); without it each test prints a note and passes.
@@ -64,16 +64,4 @@ fn python_mcap_readers_decode_every_message_of_every_converted_channel() {
     let text = format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
     eprintln!("{text}");
     assert!(o.status.success(), "scripts/check_mcap.py found problems:\n{text}");
-}
-
-#[test]
-fn the_readmes_python_recipe_loads_what_export_csv_gives() {
-    let Some(py) = python() else { return };
-    let o = Command::new(&py)
-        .arg(repo().join("scripts/test_load_trial.py"))
-        .arg(env!("CARGO_BIN_EXE_smocap"))
-        .output()
-        .unwrap();
-    let text = format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
-    assert!(o.status.success(), "scripts/test_load_trial.py failed:\n{text}");
 }

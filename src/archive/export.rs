@@ -68,6 +68,10 @@ pub struct TrialRecord {
     /// Observed markers per frame index (`/markers`): x y z (m, model frame) per marker in
     /// [`Self::marker_names`] order, NaN where not observed.
     pub observed: BTreeMap<usize, Vec<f32>>,
+    /// The `/smocap/subject` message (names, calibrated scales), when the file has one.
+    pub subject: Option<proto::Subject>,
+    /// The `/smocap/stats` messages by frame (protobuf files).
+    pub stats: BTreeMap<usize, proto::SolverStats>,
 }
 
 /// Reads the frames of `path` (a file written by `smocap convert`: protobuf channels, or the
@@ -119,6 +123,7 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
     let mut subject: Option<proto::Subject> = None;
     let mut raw_states: Vec<proto::State> = Vec::new();
     let mut observed = BTreeMap::new();
+    let mut stats = BTreeMap::new();
     #[derive(Deserialize)]
     struct Tagged {
         frame: usize,
@@ -143,6 +148,7 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
                     let f = s.frame as usize;
                     rmse.insert(f, s.marker_rmse.is_finite().then_some(s.marker_rmse));
                     status.insert(f, proto::STATUS_NAMES.get(s.status as usize).map(|n| n.to_string()));
+                    stats.insert(f, s);
                 }
                 _ => {}
             }
@@ -172,9 +178,9 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
         }
     }
     if !raw_states.is_empty() {
-        let sub = subject.ok_or_else(|| bad("/smocap/state without a /smocap/subject message".into()))?;
+        let sub = subject.as_ref().ok_or_else(|| bad("/smocap/state without a /smocap/subject message".into()))?;
         for s in raw_states {
-            let st = state_by_name(&sub, &s).map_err(|e| bad(format!("/smocap/state frame {}: {e}", s.frame)))?;
+            let st = state_by_name(sub, &s).map_err(|e| bad(format!("/smocap/state frame {}: {e}", s.frame)))?;
             states.insert(st.frame, st);
         }
     }
@@ -185,7 +191,17 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
         .into_iter()
         .map(|(f, state)| Frame { state, rmse_m: rmse.get(&f).copied().flatten(), status: status.remove(&f).flatten() })
         .collect();
-    Ok(TrialRecord { frames, time_offset, scaled_model, model_source, marker_names, world_from_model, observed })
+    Ok(TrialRecord {
+        frames,
+        time_offset,
+        scaled_model,
+        model_source,
+        marker_names,
+        world_from_model,
+        observed,
+        subject,
+        stats,
+    })
 }
 
 /// The points of a `/markers` cloud as float32 x y z triples (the layout `smocap convert`
@@ -204,14 +220,21 @@ fn cloud_xyz(c: &proto::PointCloud) -> Result<Vec<f32>, String> {
 /// A protobuf state with its arrays named after `sub`: coordinates by name, each body's scale
 /// factors from its scale proxies (or its fixed value).
 fn state_by_name(sub: &proto::Subject, s: &proto::State) -> Result<StateMsg, String> {
-    let nb = sub.bodies.len();
     if s.q.len() != sub.coordinates.len() {
         return Err(format!("{} coordinates for {} named", s.q.len(), sub.coordinates.len()));
     }
+    let q = sub.coordinates.iter().cloned().zip(s.q.iter().copied()).collect();
+    let scales = body_scales(sub, Some(&s.scale_drift_ppm))?;
+    Ok(StateMsg { time: s.time, frame: s.frame as usize, q, s: scales })
+}
+
+/// Each body's scale factors `[x, y, z]` by name: its scale proxies' calibrated values (times
+/// `1 + drift` for a frame's `drift_ppm`, `State.scale_drift_ppm`), or its fixed value.
+pub fn body_scales(sub: &proto::Subject, drift_ppm: Option<&[i32]>) -> Result<BTreeMap<String, [f64; 3]>, String> {
+    let nb = sub.bodies.len();
     if sub.body_scale.len() != 3 * nb || sub.body_scale_proxy.len() != 3 * nb {
         return Err(format!("the subject's scales do not have 3 values for each of its {nb} bodies"));
     }
-    let q = sub.coordinates.iter().cloned().zip(s.q.iter().copied()).collect();
     let mut scales = BTreeMap::new();
     for (b, body) in sub.bodies.iter().enumerate() {
         let mut v = [0.0; 3];
@@ -220,7 +243,10 @@ fn state_by_name(sub: &proto::Subject, s: &proto::State) -> Result<StateMsg, Str
             *x = match usize::try_from(sub.body_scale_proxy[i]) {
                 Ok(k) => {
                     let missing = || format!("scale proxy {k} of body '{body}' is missing");
-                    let drift = *s.scale_drift_ppm.get(k).ok_or_else(missing)?;
+                    let drift = match drift_ppm {
+                        Some(d) => *d.get(k).ok_or_else(missing)?,
+                        None => 0,
+                    };
                     sub.calibrated_scale.get(k).ok_or_else(missing)? * (1.0 + drift as f64 * 1e-6)
                 }
                 Err(_) => sub.body_scale[i],
@@ -228,7 +254,7 @@ fn state_by_name(sub: &proto::Subject, s: &proto::State) -> Result<StateMsg, Str
         }
         scales.insert(body.clone(), v);
     }
-    Ok(StateMsg { time: s.time, frame: s.frame as usize, q, s: scales })
+    Ok(scales)
 }
 
 /// The model a record was converted with (its coordinate order and motion types): the shipped

@@ -185,7 +185,7 @@ impl BackendArgs {
         ctx: &crate::pipeline::Context,
         threads: usize,
     ) -> anyhow::Result<(crate::pipeline::device::Chosen, usize)> {
-        use crate::pipeline::device::{choose, Chosen};
+        use crate::pipeline::device::choose;
         let chosen = choose(self.backend, &ctx.evaluator(), crate::kinematics::gpu::DEFAULT_CAP)?;
         if let Some(note) = chosen.note() {
             eprintln!("note: {note}");
@@ -193,10 +193,7 @@ impl BackendArgs {
         if let Some(l) = self.lanes {
             anyhow::ensure!((1..=1 << 20).contains(&l), "--lanes {l}: expected 1 to {}", 1 << 20);
         }
-        let lanes = self.lanes.unwrap_or(match chosen {
-            Chosen::Cpu { .. } => threads,
-            Chosen::Wgpu(_) => 4096,
-        });
+        let lanes = self.lanes.unwrap_or_else(|| chosen.default_lanes(threads));
         Ok((chosen, lanes.max(1)))
     }
 }

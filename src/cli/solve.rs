@@ -1,9 +1,8 @@
 //! `smocap solve`: calibrate a subject, then solve its trials.
 
-use crate::pipeline::report::{trial_report, Report};
-use crate::pipeline::solve_trial_with;
-use crate::pipeline::subject::{calibrate_placed_with, prepare_subject, Subject, SubjectFiles};
-use crate::pipeline::verdict::Verdict;
+use crate::pipeline::report::Report;
+use crate::pipeline::session;
+use crate::pipeline::subject::{prepare_subject, Subject, SubjectFiles};
 use crate::solve::QpBackend;
 use crate::synth::Truth;
 use anyhow::Context as _;
@@ -113,11 +112,8 @@ fn read_trial(
     path: &std::path::Path,
     opt: &crate::pipeline::convention::InputOptions,
 ) -> anyhow::Result<(crate::io::MarkerTrial, crate::pipeline::convention::InputConventions)> {
-    let (mut t, conv) = crate::pipeline::subject::read_trial(ctx, path, opt)?;
+    let (t, conv) = session::read_input(ctx, path, opt)?;
     eprintln!("{}: {}", path.display(), conv.summary());
-    if let Some(w) = crate::pipeline::verdict::mask_implausible(&mut t) {
-        t.warnings.push(w);
-    }
     for w in t.warnings.iter().filter(|w| w.contains("masked as gaps")) {
         eprintln!("warning: {}: {w}", path.display());
     }
@@ -130,9 +126,7 @@ pub fn apply_set(ctx: &mut crate::pipeline::Context, set: &[String]) -> anyhow::
         return Ok(());
     }
     let table: toml::Table = toml::from_str(&set.join("\n")).context("--set: expected KEY=VALUE (a TOML value)")?;
-    ctx.settings = ctx.settings.with_overrides(&table).map_err(|e| anyhow::anyhow!("--set: {e}"))?;
-    ctx.settings.qp = crate::solve::backend_for(ctx.settings.qp, &ctx.proxy);
-    Ok(())
+    session::apply_overrides(ctx, &table).map_err(|e| anyhow::anyhow!("--set: {e}"))
 }
 
 pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
@@ -199,76 +193,40 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         _ => Vec::new(),
     };
     let motions: Vec<(&str, &crate::io::MarkerTrial)> = loaded.iter().map(|(n, t, _)| (n.as_str(), t)).collect();
-    let generic = ctx.clone();
-    let calibration = if statics.is_empty() && motions.is_empty() {
+    let calibrated = if statics.is_empty() && motions.is_empty() {
         None
     } else {
-        Some(calibrate_placed_with(&ctx, &statics, &motions).map(|(c, placed)| {
-            // Marker placement moved the subject's markers: solve with them.
-            if let Some(p) = placed {
-                ctx = p;
-            }
-            c
-        }))
+        Some(session::calibrate(&ctx, &statics, &motions))
     };
-    let suspect = match &calibration {
-        Some(Ok(c)) => {
-            let cr = crate::pipeline::report::CalibrationReport::new(&generic, c);
-            eprintln!("{}", cr.summary());
-            for w in &cr.warnings {
-                eprintln!("warning: calibration: {w}");
-            }
-            report.calibration = Some(cr);
-            c.suspect()
+    if let Some(Ok(c)) = &calibrated {
+        eprintln!("{}", c.report.summary());
+        for w in &c.report.warnings {
+            eprintln!("warning: calibration: {w}");
         }
-        _ => Vec::new(),
+        report.calibration = Some(c.report.clone());
+    }
+    // Marker placement moved the subject's markers: solve with them.
+    let ctx = match &calibrated {
+        Some(Ok(c)) => &c.ctx,
+        _ => &ctx,
     };
     // The backend holds the model (on the GPU for wgpu): chosen once the markers are final.
-    let (mut chosen, lanes) = a.backend.choose(&ctx, threads)?;
+    let (mut chosen, lanes) = a.backend.choose(ctx, threads)?;
     report.set_backend(&chosen, lanes);
     let mut solved = Vec::new();
     for (name, t, conv) in &loaded {
-        let result = match &calibration {
-            Some(Ok(c)) => {
-                solve_trial_with(&ctx, name, t, c, threads, lanes, chosen.backend()).map_err(|e| e.to_string())
-            }
+        let result = match &calibrated {
+            Some(Ok(c)) => session::solve_judged(c, name, t, conv, threads, lanes, chosen.backend(), truth.as_ref()),
             Some(Err(e)) => Err(format!("calibration failed: {e}")),
             None => Err("no calibration".into()),
         };
         match result {
-            Ok(r) => {
-                let verdict = judge(&r);
-                if let Verdict::Failed(why) = &verdict {
-                    report.push(Report::failed(name, format!("{name}: {why}")));
-                    continue;
+            Ok(j) => {
+                for n in &j.notes {
+                    eprintln!("{n}");
                 }
-                for &f in &r.bridged {
-                    eprintln!(
-                        "{name}: frame {f} (file frame {}, t = {:.3} s) has fewer than {} observed markers; bridged from its neighbours",
-                        t.frame_numbers.get(f).copied().unwrap_or(f as i64 + 1),
-                        t.times.get(f).copied().unwrap_or(f64::NAN),
-                        ctx.settings.min_markers
-                    );
-                }
-                if !r.presolved.is_empty() {
-                    eprintln!("{name}: {} outlier frames improved by pre-solve", r.presolved.len());
-                }
-                let mut tr = trial_report(&ctx, &r, truth.as_ref());
-                tr.input = Some(conv.clone());
-                // Suspect: the trial's frames (mostly at the iteration cap) or its subject's calibration.
-                let mut why: Vec<String> = verdict.reason().into_iter().collect();
-                why.extend(tr.plausibility.iter().flat_map(|p| p.suspect.iter().cloned()));
-                if !suspect.is_empty() {
-                    why.push(format!("suspect calibration: {}", suspect.join("; ")));
-                }
-                if !why.is_empty() {
-                    let why = why.join("; ");
-                    eprintln!("warning: {name}: suspect: {why}");
-                    tr.status = "suspect".into();
-                    tr.error = Some(why);
-                }
-                report.push(tr);
-                solved.push((t, r));
+                report.push(j.report);
+                solved.push((t, j.result));
             }
             Err(e) => report.push(Report::failed(name, e)),
         }
@@ -278,7 +236,7 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         std::fs::write(path, serde_json::to_string_pretty(&report)?)
             .with_context(|| format!("writing {}", path.display()))?;
     }
-    export(&a, &ctx, &solved, calibration.as_ref().and_then(|c| c.as_ref().ok()))?;
+    export(&a, ctx, &solved, calibrated.as_ref().and_then(|c| c.as_ref().ok()).map(|c| &c.calibration))?;
     let failed = report.trials.iter().filter(|t| t.status != "ok").count();
     if failed > 0 {
         eprintln!("{failed} of {} trials failed or are suspect", report.trials.len());
@@ -290,15 +248,6 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         }
     }
     Ok(super::exit_code(report.trials.len() - failed, failed, false))
-}
-
-/// The verdict on a solved trial ([`crate::pipeline::verdict`]).
-fn judge(r: &crate::pipeline::TrialResult) -> Verdict {
-    let mut j = crate::pipeline::verdict::Judge::default();
-    for (f, (p, st)) in r.proxies.iter().zip(&r.stats).enumerate() {
-        j.frame(f, p, st, r.bridged.binary_search(&f).is_ok());
-    }
-    j.verdict()
 }
 
 /// Creates the folders the outputs go to, and finds `.mot` name clashes, before any work.

@@ -13,7 +13,7 @@ mod params;
 
 use std::path::Path;
 
-use super::markers::{units_to_metres, MarkerTrial};
+use super::markers::{per_metre, units_to_metres, MarkerTrial};
 use params::Params;
 
 /// Why a C3D file could not be read; every variant names the file.
@@ -317,16 +317,6 @@ fn point_labels(params: &Params, n: usize, warnings: &mut Vec<String>) -> Vec<St
         }
     }
     labels
-}
-
-/// Units per metre for a unit of `scale` metres, made whole when it nearly is.
-fn per_metre(scale: f64) -> f64 {
-    let p = 1.0 / scale;
-    if (p - p.round()).abs() < 1e-9 * p {
-        p.round()
-    } else {
-        p
-    }
 }
 
 /// At most 40 characters of `s`, for error messages.

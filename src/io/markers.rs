@@ -38,6 +38,17 @@ pub fn units_to_metres(units: &str) -> Option<f64> {
     }
 }
 
+/// Units per metre for a unit of `scale` metres, made whole when it nearly is (1000 for mm), so
+/// that dividing reads `9 mm` as exactly `0.009` m: how every reader brings positions into metres.
+pub fn per_metre(scale: f64) -> f64 {
+    let p = 1.0 / scale;
+    if (p - p.round()).abs() < 1e-9 * p {
+        p.round()
+    } else {
+        p
+    }
+}
+
 impl MarkerTrial {
     /// Number of frames.
     pub fn n_frames(&self) -> usize {

@@ -9,7 +9,7 @@
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 
-use super::markers::{units_to_metres, MarkerTrial};
+use super::markers::{per_metre, units_to_metres, MarkerTrial};
 
 /// Why a TRC file could not be read or written. `line` is 1-based.
 #[derive(Debug, thiserror::Error)]
@@ -205,17 +205,6 @@ fn labels_of(line: &str, warnings: &mut Vec<String>) -> Vec<String> {
             }
         })
         .collect()
-}
-
-/// Units per metre for a unit of `scale` metres, made whole when it nearly is
-/// (1000 for mm), so that dividing reads `9 mm` as exactly `0.009` m.
-fn per_metre(scale: f64) -> f64 {
-    let p = 1.0 / scale;
-    if (p - p.round()).abs() < 1e-9 * p {
-        p.round()
-    } else {
-        p
-    }
 }
 
 /// Parses a whole-number frame cell (`12` or `12.0`).

@@ -58,6 +58,15 @@ impl Chosen {
         }
     }
 
+    /// Lanes of the scheduler when none are asked for: one per thread on the CPU, 4096 on wgpu
+    /// (enough segments in flight to fill a device batch).
+    pub fn default_lanes(&self, threads: usize) -> usize {
+        match self {
+            Chosen::Cpu { .. } => threads,
+            Chosen::Wgpu(_) => 4096,
+        }
+    }
+
     /// The batch backend to pass to the trial driver (None: the driver's own CPU backend).
     pub fn backend(&mut self) -> Option<&mut (dyn BatchBackend + 'static)> {
         match self {

@@ -56,17 +56,26 @@ pub fn motion_table(ctx: &Context, proxies: &[Vec<f64>], times: &[f64]) -> Resul
     if proxies.len() != times.len() {
         return Err(ExportError::Frames { frames: proxies.len(), times: times.len() });
     }
+    let q = coordinates(ctx, proxies)?;
+    Ok(coordinate_table(&ctx.model, times.iter().copied().zip(q)))
+}
+
+/// Every model coordinate (model order, locked and coupled ones too, rad or m) of each frame's
+/// proxies, through the proxy map: the numbers a motion ([`motion_table`]) holds, before degrees.
+pub fn coordinates(ctx: &Context, proxies: &[Vec<f64>]) -> Result<Vec<Vec<f64>>, ExportError> {
     let np = ctx.proxy.np();
     if let Some(p) = proxies.iter().find(|p| p.len() != np) {
         return Err(ExportError::Proxies { proxies: p.len(), expected: np });
     }
     let model = &ctx.model;
     let (mut y, mut dphi) = (vec![0.0; model.ny()], vec![0.0; ctx.proxy.terms.len()]);
-    let frames = proxies.iter().zip(times).map(|(p, &t)| {
-        ctx.proxy.apply(p, &mut y, &mut dphi);
-        (t, y[..model.nq()].to_vec())
-    });
-    Ok(coordinate_table(model, frames))
+    Ok(proxies
+        .iter()
+        .map(|p| {
+            ctx.proxy.apply(p, &mut y, &mut dphi);
+            y[..model.nq()].to_vec()
+        })
+        .collect())
 }
 
 /// An OpenSim motion from `(time s, coordinates in model order, rad or m)` per frame: `time`,

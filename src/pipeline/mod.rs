@@ -14,6 +14,7 @@ pub mod lanes;
 pub mod matching;
 pub mod plausibility;
 pub mod report;
+pub mod session;
 pub mod stats;
 pub mod stream;
 pub mod subject;

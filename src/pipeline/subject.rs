@@ -83,19 +83,28 @@ pub fn load_context(
 /// Scale setup, marker placement, QP backend, IK setup; without a static trial, calibration
 /// weights are the motion weights.
 pub fn prepare_subject(f: &SubjectFiles) -> Result<Subject, SetupError> {
+    prepare_subject_with(f, false)
+}
+
+/// [`prepare_subject`], with `static_given` saying that the static trial is given otherwise than
+/// as a file (e.g. in memory): the subject is then set up for a static calibration, and neither
+/// `f.static_trial` nor the Scale setup's static file is looked at (`static_path` is `None`).
+pub fn prepare_subject_with(f: &SubjectFiles, static_given: bool) -> Result<Subject, SetupError> {
     let mut notes = Vec::new();
     let setup = f.scale_setup.as_deref().map(crate::io::osim::read_scale_setup).transpose()?;
     let markerset = f.markerset.clone().or_else(|| setup.as_ref().and_then(|s| s.marker_set_file.clone()));
     let static_path = match (&f.static_trial, setup.as_ref().and_then(|s| s.static_file.clone())) {
+        _ if static_given => None,
         (Some(p), _) => Some(p.clone()),
         (None, Some(p)) if p.exists() => Some(p),
         (None, Some(p)) => return Err(SetupError::StaticMissing { path: p.display().to_string() }),
         (None, None) => None,
     };
+    let has_static = static_path.is_some() || static_given;
     f.subject.validate().map_err(TrialError::from)?;
     let mut ctx = load_context(f.model.as_deref(), markerset.as_deref(), f.profile.as_deref())?;
     ctx.subject = f.subject;
-    ctx.static_calibration = static_path.is_some();
+    ctx.static_calibration = has_static;
     if f.model.is_some() {
         notes.extend(ctx.warnings.iter().map(|w| format!("warning: {w}")));
     }
@@ -131,7 +140,7 @@ pub fn prepare_subject(f: &SubjectFiles) -> Result<Subject, SetupError> {
         ));
     }
     // Without a static trial, calibration runs on the motion frames with the motion weights.
-    if static_path.is_none() {
+    if !has_static {
         ctx.calibration_weights = ctx.marker_weights.clone();
     }
     Ok(Subject { ctx, static_path, notes })

@@ -1,0 +1,57 @@
+"""smocap: joint scale–pose canonicalization of marker-based motion capture, from Python.
+
+Calibrate a subject (segment scales, registered markers) and solve its trials frame by frame
+with the Rust library that the ``smocap`` command line runs: the same numbers, the same verdicts,
+the same files. Arrays are NumPy arrays, tables pandas DataFrames, reports dicts; the GIL is
+released while Rust works, so Python threads solve in parallel.
+
+    import smocap
+    model = smocap.Model("gait2354_simbody.osim", markerset="gait2354_Scale_MarkerSet.xml")
+    subject = smocap.calibrate(model, ["walk.trc"], static="static.trc")
+    motion = subject.solve("walk.trc")
+    motion.q["knee_angle_r"]        # radians, indexed by time (s)
+    motion.to_mot("walk.mot")       # as `smocap solve --mot-dir` writes it
+
+Errors raise :class:`SmocapError` (or a subclass) with the message the command line prints;
+results to use with care (a ``suspect`` trial or calibration) warn with :class:`SmocapWarning`.
+"""
+
+from ._smocap import (
+    ArchiveError,
+    CalibrationError,
+    MarkerFileError,
+    Markers,
+    Model,
+    ModelError,
+    Motion,
+    SmocapError,
+    SmocapWarning,
+    SolveError,
+    Subject,
+    Trial,
+    __version__,
+    calibrate,
+    convert,
+    read_markers,
+    read_trial,
+)
+
+__all__ = [
+    "ArchiveError",
+    "CalibrationError",
+    "MarkerFileError",
+    "Markers",
+    "Model",
+    "ModelError",
+    "Motion",
+    "SmocapError",
+    "SmocapWarning",
+    "SolveError",
+    "Subject",
+    "Trial",
+    "__version__",
+    "calibrate",
+    "convert",
+    "read_markers",
+    "read_trial",
+]

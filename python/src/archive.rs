@@ -1,0 +1,167 @@
+//! `read_trial` and `Trial`: a trial converted by `smocap convert` read back from its `.mcap`
+//! file (`smocap::archive::export::read_trial_record`, as `smocap export` reads it).
+
+use crate::errors::{to_py, ArchiveError};
+use numpy::{PyArray1, PyArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use smocap::archive::export::{body_scales, conversion_model, read_trial_record, write_mot, TrialRecord};
+use smocap::archive::proto::{SolverStats, STATUS_NAMES};
+use std::path::PathBuf;
+
+/// A converted trial: coordinates, solver statistics and observed markers per frame, and the
+/// subject (names, calibrated scales).
+#[pyclass(module = "smocap", frozen)]
+pub struct Trial {
+    rec: TrialRecord,
+    path: PathBuf,
+}
+
+impl Trial {
+    /// Frame times (s) as in the input file: the messages' times plus the first sample's.
+    fn time(&self) -> Vec<f64> {
+        self.rec.frames.iter().map(|f| f.state.time + self.rec.time_offset).collect()
+    }
+
+    /// Coordinate names: the subject's order, else (files of the JSON encoding) by name.
+    fn coordinate_names(&self) -> Vec<String> {
+        match &self.rec.subject {
+            Some(s) => s.coordinates.clone(),
+            None => self.rec.frames.first().map(|f| f.state.q.keys().cloned().collect()).unwrap_or_default(),
+        }
+    }
+}
+
+/// Reads a trial converted by `smocap convert` (its MCAP structure checked first).
+#[pyfunction]
+pub fn read_trial(py: Python<'_>, path: PathBuf) -> PyResult<Trial> {
+    let rec = py.detach(|| read_trial_record(&path)).map_err(to_py::<ArchiveError>)?;
+    Ok(Trial { rec, path })
+}
+
+#[pymethods]
+impl Trial {
+    /// Every coordinate per frame (rad or m), in the subject's order, indexed by frame time (s,
+    /// as in the input file).
+    #[getter]
+    fn q<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let names = self.coordinate_names();
+        let rows: Vec<f64> = self
+            .rec
+            .frames
+            .iter()
+            .flat_map(|f| names.iter().map(|n| f.state.q.get(n).copied().unwrap_or(f64::NAN)))
+            .collect();
+        crate::table(py, rows, names, self.time())
+    }
+
+    /// Per frame, from `/smocap/stats`: `iterations`, `accepted_steps`, `energy`, `rmse` (the
+    /// solver's weighted marker RMSE, m), `markers_used`, `markers_observed`, `status`,
+    /// `bridged`, `marker_rmse` (unweighted RMS of observed − model markers, m; NaN when none is
+    /// observed), `solve_s` (0 unless converted with `--timings`).
+    #[getter]
+    fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let frames = &self.rec.frames;
+        if self.rec.stats.is_empty() {
+            // Files of the JSON encoding: RMSE and status only.
+            let rmse: Vec<f64> = frames.iter().map(|f| f.rmse_m.unwrap_or(f64::NAN)).collect();
+            let status: Vec<Option<String>> = frames.iter().map(|f| f.status.clone()).collect();
+            let cols = vec![
+                ("marker_rmse", PyArray1::from_vec(py, rmse).into_any()),
+                ("status", status.into_pyobject(py)?.into_any()),
+            ];
+            return crate::columns(py, cols, self.time());
+        }
+        let none = SolverStats::default();
+        let st: Vec<&SolverStats> =
+            frames.iter().map(|f| self.rec.stats.get(&f.state.frame).unwrap_or(&none)).collect();
+        let col = |v: Vec<f64>| PyArray1::from_vec(py, v).into_any();
+        let int = |v: Vec<i64>| PyArray1::from_vec(py, v).into_any();
+        let status: Vec<&str> = st.iter().map(|s| STATUS_NAMES.get(s.status as usize).copied().unwrap_or("")).collect();
+        let cols = vec![
+            ("iterations", int(st.iter().map(|s| i64::from(s.iterations)).collect())),
+            ("accepted_steps", int(st.iter().map(|s| i64::from(s.accepted_steps)).collect())),
+            ("energy", col(st.iter().map(|s| s.energy).collect())),
+            ("rmse", col(st.iter().map(|s| s.rmse).collect())),
+            ("markers_used", int(st.iter().map(|s| i64::from(s.markers_used)).collect())),
+            ("markers_observed", int(st.iter().map(|s| i64::from(s.markers_observed)).collect())),
+            ("status", status.into_pyobject(py)?.into_any()),
+            ("bridged", PyArray1::from_vec(py, st.iter().map(|s| s.bridged).collect::<Vec<bool>>()).into_any()),
+            ("marker_rmse", col(st.iter().map(|s| s.marker_rmse).collect())),
+            ("solve_s", col(st.iter().map(|s| f64::from(s.solve_s)).collect())),
+        ];
+        crate::columns(py, cols, self.time())
+    }
+
+    /// Observed markers per frame, shape (frames, markers, 3) (m, in the model's frame, float32
+    /// in the file), NaN where not observed; `marker_names` names the second axis.
+    #[getter]
+    fn markers<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let n = self.rec.marker_names.len();
+        let mut v = Vec::with_capacity(self.rec.frames.len() * n * 3);
+        for f in &self.rec.frames {
+            match self.rec.observed.get(&f.state.frame).filter(|p| p.len() == 3 * n) {
+                Some(p) => v.extend(p.iter().map(|&x| f64::from(x))),
+                None => v.extend(std::iter::repeat_n(f64::NAN, 3 * n)),
+            }
+        }
+        Ok(PyArray1::from_vec(py, v).reshape([self.rec.frames.len(), n, 3])?.into_any())
+    }
+
+    /// The model markers, in `/smocap/subject` order (the second axis of `markers`).
+    #[getter]
+    fn marker_names(&self) -> Vec<String> {
+        self.rec.marker_names.clone()
+    }
+
+    /// Frame times (s), as in the input file.
+    #[getter]
+    fn times<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, self.time())
+    }
+
+    /// The subject, from `/smocap/subject`: `dataset`, `subject`, `trial`, `coordinates`,
+    /// `coordinate_units`, `bodies`, `body_parents`, `markers`, `marker_bodies`, `proxies`,
+    /// `scales` (calibrated `[x, y, z]` by body), `world_from_model` (`[x, y, z, w]`).
+    #[getter]
+    fn subject<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        let Some(s) = &self.rec.subject else {
+            d.set_item("coordinates", self.coordinate_names())?;
+            return Ok(d);
+        };
+        d.set_item("dataset", &s.dataset)?;
+        d.set_item("subject", &s.subject)?;
+        d.set_item("trial", &s.trial)?;
+        d.set_item("coordinates", &s.coordinates)?;
+        d.set_item("coordinate_units", &s.coordinate_units)?;
+        d.set_item("bodies", &s.bodies)?;
+        d.set_item("body_parents", &s.body_parents)?;
+        d.set_item("markers", &s.markers)?;
+        d.set_item("marker_bodies", &s.marker_bodies)?;
+        d.set_item("proxies", &s.proxies)?;
+        let scales =
+            body_scales(s, None).map_err(|e| ArchiveError::new_err(format!("{}: {e}", self.path.display())))?;
+        d.set_item("scales", scales)?;
+        d.set_item("world_from_model", &s.world_from_model)?;
+        Ok(d)
+    }
+
+    /// Writes the coordinates as OpenSim's `.mot`, as `smocap export --mot` does (the
+    /// conversion's model gives the order and which coordinates are in degrees).
+    fn to_mot(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        py.detach(|| -> Result<(), smocap::archive::export::ExportError> {
+            let model = conversion_model(&self.rec, &self.path)?;
+            write_mot(&self.rec, &model, &path)
+        })
+        .map_err(to_py::<ArchiveError>)
+    }
+
+    fn __len__(&self) -> usize {
+        self.rec.frames.len()
+    }
+
+    fn __repr__(&self) -> String {
+        format!("Trial({:?}: {} frames)", self.path.display().to_string(), self.rec.frames.len())
+    }
+}
