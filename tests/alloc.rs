@@ -163,11 +163,7 @@ fn writing_frames_allocates_far_less_than_once_per_frame() {
         frames: 1,
         iterations: 1,
         rmse_m: 0.0,
-        registered: 0,
-        seconds: 0.0,
-        prior: Default::default(),
-        frame_proxies: Vec::new(),
-        marker_offsets: None,
+        ..Default::default()
     };
     let dir = std::env::temp_dir().join(format!("smocap-alloc-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();

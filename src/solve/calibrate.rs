@@ -26,7 +26,7 @@ use nalgebra::{DMatrix, DVector, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// What calibration found.
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct Calibration {
     /// Full proxy vector whose scale entries are the subject's morphology (pose entries: the
     /// last calibration frame's pose).
