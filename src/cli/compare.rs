@@ -42,7 +42,7 @@ pub struct CompareArgs {
     /// pelvis tilt and list.
     #[arg(long)]
     pub core: bool,
-    /// Largest time difference (s) between matched frames (default: half the coarser frame period).
+    /// Largest time difference (s) between matched frames (default: half the finer frame period: frames sampled at the same instant).
     #[arg(long)]
     pub tolerance: Option<f64>,
     /// Seconds added to the reference's times before matching.

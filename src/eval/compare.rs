@@ -3,7 +3,7 @@
 //!
 //! Both sides are [`Motion`]s: named coordinate series on their own time axes (rotations in
 //! degrees, translations in millimetres). Frames are matched by time (nearest sample within a
-//! tolerance, half the coarser frame period by default), angle differences are wrapped to
+//! tolerance, half the finer frame period by default), angle differences are wrapped to
 //! ±180°, and each coordinate gets its RMSE, mean offset, RMSE with the offset removed,
 //! correlation and largest difference ([`compare`]). The inputs are read by [`load`].
 
@@ -60,8 +60,9 @@ impl Motion {
 /// How frames are matched.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct CompareOptions {
-    /// Largest time difference (s) between matched frames; `None`: half the coarser of the two
-    /// motions' median frame periods.
+    /// Largest time difference (s) between matched frames; `None`: half the finer of the two
+    /// motions' median frame periods, so that only frames sampled at the same instant are
+    /// compared (a 100 Hz trial against a 50 Hz reference: every other frame).
     pub tolerance_s: Option<f64>,
     /// Added to the reference's times before matching (s): a reference that starts its clock
     /// elsewhere.
@@ -166,8 +167,8 @@ pub fn match_times(a: &[f64], b: &[f64], tol: f64) -> Vec<Option<usize>> {
 pub fn compare(ours: &Motion, reference: &Motion, opt: &CompareOptions) -> Result<Comparison, CompareError> {
     let ref_times: Vec<f64> = reference.times.iter().map(|t| t + opt.reference_shift_s).collect();
     let tol = opt.tolerance_s.unwrap_or_else(|| {
-        let p = median_period(&ours.times).into_iter().chain(median_period(&ref_times)).fold(0.0, f64::max);
-        if p > 0.0 {
+        let p = median_period(&ours.times).into_iter().chain(median_period(&ref_times)).fold(f64::INFINITY, f64::min);
+        if p.is_finite() && p > 0.0 {
             0.5 * p
         } else {
             1e-6
@@ -340,8 +341,8 @@ mod tests {
         .unwrap();
         let s = c.get("hip").unwrap();
         assert!(s.rmse < 1e-9, "{s:?}");
-        // 0.1 s ..= 1.88 s at 100 Hz, each within 10 ms of a reference frame.
-        assert_eq!(c.matched_frames, 179);
+        // The frames of 0.1 s ..= 1.88 s that the 50 Hz reference also sampled.
+        assert_eq!(c.matched_frames, 90);
     }
 
     #[test]
