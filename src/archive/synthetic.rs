@@ -5,7 +5,9 @@
 use super::config::SyntheticSpec;
 use crate::io::{trc, MarkerTrial};
 use crate::pipeline::Context;
-use crate::synth::{synthesize, SynthOptions};
+use crate::model::proxy::ProxyKind;
+use crate::synth::{synthesize_with, SynthOptions};
+use std::f64::consts::TAU;
 use std::path::Path;
 
 /// Frames `a..b` of `t`, times starting at 0.
@@ -23,7 +25,7 @@ fn cut(t: &MarkerTrial, a: usize, b: usize) -> MarkerTrial {
     }
 }
 
-/// Writes the dataset under `root` as `subjNN/static.trc` and `subjNN/walkNN.trc` (mm), unless
+/// Writes the dataset under `root` as `subjNN/static.trc` (standing) and `subjNN/walkNN.trc` (mm), unless
 /// `root/.complete` says it was written with the same spec.
 pub fn generate(spec: &SyntheticSpec, root: &Path) -> anyhow::Result<()> {
     spec.validate().map_err(anyhow::Error::msg)?;
@@ -41,7 +43,24 @@ pub fn generate(spec: &SyntheticSpec, root: &Path) -> anyhow::Result<()> {
             misplace_m: 0.005,
             ..SynthOptions::default()
         };
-        let syn = synthesize(&ctx.model, &ctx.proxy, &opt);
+        // The static trial stands: every pose proxy at its neutral value, swaying by ≤ 0.6°.
+        let (neutral, rate) = (ctx.proxy.default_proxies(), opt.rate_hz);
+        let kinds: Vec<(ProxyKind, (f64, f64))> = ctx.proxy.proxies.iter().map(|p| (p.kind, p.range)).collect();
+        let standing = |t: f64, p: &mut [f64]| {
+            if t * rate < n as f64 - 0.5 {
+                for (k, v) in p.iter_mut().enumerate() {
+                    let (kind, (lo, hi)) = kinds[k];
+                    match kind {
+                        ProxyKind::Scale => {}
+                        ProxyKind::Rotation => {
+                            *v = (neutral[k] + 0.01 * (TAU * (0.2 + 0.05 * (k % 7) as f64) * t).sin()).clamp(lo, hi)
+                        }
+                        ProxyKind::Translation => *v = neutral[k],
+                    }
+                }
+            }
+        };
+        let syn = synthesize_with(&ctx.model, &ctx.proxy, &opt, standing);
         let dir = root.join(format!("subj{:02}", s + 1));
         std::fs::create_dir_all(&dir)?;
         for k in 0..=spec.trials {
