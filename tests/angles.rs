@@ -75,10 +75,9 @@ fn opencap_angles_agree_with_addbiomechanics_ik() {
         eprintln!("{n}: mean core RMSE {:.2}°, worst {} {:.2}°", mean_rmse(&c), worst.name, worst.rmse);
         assert_eq!(c.coordinates.len(), CORE.len(), "{n}: {:?}", c.missing_in_ours);
         assert!(mean_rmse(&c) <= 3.0, "{n}: mean core RMSE {:.2}° against AddBiomechanics", mean_rmse(&c));
-        // Walking: every core coordinate within 5°. The drop jumps' landings hold frames where
-        // AddBiomechanics dropped jumping foot markers (its log) that this solve uses: within 6°.
-        let limit = if n.starts_with("walking") { 5.0 } else { 6.0 };
-        assert!(worst.rmse <= limit, "{n}: {} is {:.2}° from AddBiomechanics", worst.name, worst.rmse);
+        // Every core coordinate within 5°. (The drop jumps' landings lose both feet's markers for
+        // a frame or two: the ankles are bridged between the frames that see them, src/pipeline/order.rs.)
+        assert!(worst.rmse <= 5.0, "{n}: {} is {:.2}° from AddBiomechanics", worst.name, worst.rmse);
     }
 }
 

@@ -302,3 +302,40 @@ fn the_lane_scheduler_on_the_cpu_takes_exactly_the_steps_of_the_per_frame_loop()
         assert_eq!(r.proxies[f], plain[f], "frame {f}");
     }
 }
+
+#[test]
+fn a_foot_whose_markers_all_drop_out_is_bridged_between_the_frames_that_see_it() {
+    let ctx = Context::shipped().unwrap();
+    let mut s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 80, seed: 7, ..SynthOptions::default() });
+    let nm = s.trial.n_markers();
+    // Every marker below the right ankle (on the talus, calcaneus or toes) gone in frames 40–42.
+    let ankle = ctx.model.coordinate_index("ankle_angle_r").expect("ankle");
+    let talus = ctx.model.bodies.iter().position(|b| b.name == "talus_r").expect("talus");
+    let foot: Vec<usize> = (0..nm)
+        .filter(|&c| {
+            let label = &s.trial.labels[c];
+            ctx.model.markers.iter().any(|m| &m.name == label && ctx.model.is_ancestor(talus, m.body))
+        })
+        .collect();
+    assert!(foot.len() >= 3, "{foot:?}");
+    for f in 40..43 {
+        for &c in &foot {
+            s.trial.positions[(f * nm + c) * 3..(f * nm + c + 1) * 3].fill(f64::NAN);
+        }
+    }
+    let cal = calibrate_subject(&ctx, &[("t", &s.trial)]).unwrap();
+    let r = solve_trial(&ctx, "t", &s.trial, &cal, 1).unwrap();
+    assert!(r.bridged.is_empty(), "the frames themselves are solved: {:?}", r.bridged);
+    let q = |f: usize| ctx.proxy.state(&r.proxies[f])[ankle];
+    // Not held at frame 39's angle: on the line from frame 39 to frame 43.
+    for f in 40..43 {
+        let w = (f - 39) as f64 / 4.0;
+        let line = q(39) + w * (q(43) - q(39));
+        assert!((q(f) - line).abs() < 1e-9, "frame {f}: {} against {line}", q(f));
+    }
+    // The knee, which the shank's markers still see, is solved, not interpolated.
+    let knee = ctx.model.coordinate_index("knee_angle_r").expect("knee");
+    let k = |f: usize| ctx.proxy.state(&r.proxies[f])[knee];
+    let truth = |f: usize| s.truth.coordinates[f][knee];
+    assert!((k(41) - truth(41)).abs().to_degrees() < 2.0, "{} against {}", k(41), truth(41));
+}

@@ -65,6 +65,7 @@ pub fn functional_centres(
         out.push(FunctionalCentre {
             body: model.bodies[c].name.clone(),
             distance_mm: (fit - centre).norm() * 1e3,
+            offset_mm: ((fit - centre) * 1e3).into(),
             range_of_motion_deg: rom,
             samples: samples[i].len(),
         });

@@ -12,6 +12,7 @@ pub mod ik_tasks;
 pub mod joint_centres;
 pub mod lanes;
 pub mod matching;
+pub mod order;
 pub mod plausibility;
 pub mod report;
 pub mod session;

@@ -1,8 +1,9 @@
 //! Solving one trial frame by frame: each frame goes to a sink as soon as it and the frames before
 //! it are solved, so a writer can stream results out without holding the trial's results.
 //!
-//! Frames leave in frame order. Frames with too few markers wait until the next solved frame
-//! (they are bridged between their solved neighbours, see [`super::trial`]); with several lanes,
+//! Frames leave in frame order. Frames with too few markers, and proxies that a frame's markers do
+//! not observe, wait until a later frame observes them (they are bridged between the neighbours
+//! that did, see [`super::order`]); with several lanes,
 //! frames of later segments wait for the earlier segments. With one lane (what `smocap convert`
 //! uses on the CPU backend), what is held beyond the input trial is the current gap of unsolved
 //! frames. Several trials of one subject can be solved together ([`solve_trials_streaming`]),
@@ -11,6 +12,7 @@
 use super::frames::{for_each_window, TrialFrames};
 use super::lanes::{resolve_outliers_above, run_lanes_across, FrameObservations, FrameResult, TrialInputs};
 use super::matching::MarkerMatch;
+use super::order::Orderer;
 use super::stats::GapStats;
 use super::trial::{match_markers, no_match, GapRuns, SinkError, TrialError, TrialResult};
 use super::Context;
@@ -18,11 +20,9 @@ use crate::io::MarkerTrial;
 use crate::kinematics::assembly::Evaluator;
 use crate::kinematics::backend::{BackendError, BatchBackend, CpuBackend};
 use crate::model::proxy::ProxyKind;
-use crate::solve::init::wrap_angle;
 use crate::solve::{Calibration, FrameStats, FrameStatus, Presolve, SolverSettings};
 use rayon::prelude::*;
 use std::borrow::Cow;
-use std::collections::BTreeMap;
 use std::time::Instant;
 
 /// Where solved frames go.
@@ -65,7 +65,7 @@ pub struct StreamedTrial {
     pub threads: usize,
 }
 
-enum Stop {
+pub(crate) enum Stop {
     Backend(BackendError),
     Sink(usize, SinkError),
     Read(String),
@@ -104,93 +104,6 @@ impl Stop {
 impl From<BackendError> for Stop {
     fn from(e: BackendError) -> Stop {
         Stop::Backend(e)
-    }
-}
-
-/// Puts frames in order and bridges frames with too few markers before handing them on.
-struct Orderer<'a> {
-    ctx: &'a Context,
-    calibrated: &'a [f64],
-    next: usize,
-    /// Finished ahead of `next` (several lanes), with their observations.
-    early: BTreeMap<usize, (FrameResult, Vec<f64>)>,
-    /// The last solved frame handed on.
-    last: Option<(usize, Vec<f64>)>,
-    /// Frames with too few markers waiting for the next solved frame.
-    gap: Vec<(usize, FrameResult, Vec<f64>)>,
-    bridged: usize,
-}
-
-impl<'a> Orderer<'a> {
-    fn new(ctx: &'a Context, calibrated: &'a [f64]) -> Orderer<'a> {
-        Orderer { ctx, calibrated, next: 0, early: BTreeMap::new(), last: None, gap: Vec::new(), bridged: 0 }
-    }
-
-    /// Takes frame `f`'s result; `obs` is the window it lies in, frame `f` at `f - first`.
-    fn push(
-        &mut self,
-        f: usize,
-        r: FrameResult,
-        obs: (&FrameObservations<'_>, usize),
-        sink: &mut FrameSink<'_>,
-    ) -> Result<(), Stop> {
-        let mut observed = vec![0.0; 3 * obs.0.map.len()];
-        obs.0.fill(f - obs.1, &mut observed);
-        self.early.insert(f, (r, observed));
-        while let Some((r, observed)) = self.early.remove(&self.next) {
-            let f = self.next;
-            self.next += 1;
-            if r.1.status == FrameStatus::TooFewMarkers {
-                self.gap.push((f, r, observed));
-                continue;
-            }
-            self.flush(Some((f, r.0.as_slice())), sink)?;
-            self.last = Some((f, r.0.clone()));
-            let (proxies, stats, seconds) = r;
-            sink(SolvedFrame { index: f, proxies, stats, seconds, bridged: false, observed })
-                .map_err(|e| Stop::Sink(f, e))?;
-        }
-        Ok(())
-    }
-
-    /// Bridges the waiting frames between the last solved frame and `after`, and hands them on.
-    fn flush(&mut self, after: Option<(usize, &[f64])>, sink: &mut FrameSink<'_>) -> Result<(), Stop> {
-        let before = self.last.as_ref().map(|(g, p)| (*g, p.as_slice()));
-        for (f, (_, stats, seconds), observed) in std::mem::take(&mut self.gap) {
-            let proxies = bridge(self.ctx, f, before, after, self.calibrated);
-            self.bridged += 1;
-            sink(SolvedFrame { index: f, proxies, stats, seconds, bridged: true, observed })
-                .map_err(|e| Stop::Sink(f, e))?;
-        }
-        Ok(())
-    }
-}
-
-/// Proxies of frame `f` interpolated between the solved frames `before` and `after` (the nearer
-/// one's when only one exists; the calibration's when neither does).
-fn bridge(
-    ctx: &Context,
-    f: usize,
-    before: Option<(usize, &[f64])>,
-    after: Option<(usize, &[f64])>,
-    calibrated: &[f64],
-) -> Vec<f64> {
-    match (before, after) {
-        (Some((g0, a)), Some((g1, b))) => {
-            let w = (f - g0) as f64 / (g1 - g0) as f64;
-            (0..a.len())
-                .map(|k| {
-                    // Unbounded angles (a root heading) go the short way round.
-                    let px = &ctx.proxy.proxies[k];
-                    let unbounded = px.range.0 == f64::NEG_INFINITY && px.range.1 == f64::INFINITY;
-                    let d = b[k] - a[k];
-                    let d = if px.kind == ProxyKind::Rotation && unbounded { wrap_angle(d) } else { d };
-                    a[k] + w * d
-                })
-                .collect()
-        }
-        (Some((_, p)), None) | (None, Some((_, p))) => p.to_vec(),
-        (None, None) => calibrated.to_vec(),
     }
 }
 
@@ -551,7 +464,7 @@ fn finish(
         return Err(e);
     }
     debug_assert!(job.order.early.is_empty() && job.order.next == job.n, "every frame lies in one segment");
-    job.order.flush(None, job.sink).map_err(|e| e.into_error(job.name))?;
+    job.order.finish(job.sink).map_err(|e| e.into_error(job.name))?;
     let header = job.trial.header();
     let names: Vec<&str> = ctx.model.markers.iter().map(|m| m.name.as_str()).collect();
     let renamed = matched.renamed(&names, &header.labels).into_iter().map(|(a, b)| (a.into(), b.into())).collect();

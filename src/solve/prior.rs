@@ -484,6 +484,10 @@ pub struct FunctionalCentre {
     pub body: String,
     /// Distance between the sphere fit's centre and the model's joint centre (mm).
     pub distance_mm: f64,
+    /// The sphere fit's centre minus the model's, in the root body's frame (mm; the shipped
+    /// model's pelvis: x forward, y left, z up).
+    #[serde(default)]
+    pub offset_mm: [f64; 3],
     /// The child's range of motion relative to the root over the frames fitted (deg).
     pub range_of_motion_deg: f64,
     /// Marker positions fitted.
