@@ -94,23 +94,23 @@ pub fn lock_out(out: &Path, shard: Option<Shard>) -> Result<OutLock, LockError> 
         // Nobody writes here: this run sets the shard count, then shares the folder.
         std::fs::write(&count_path, s.count.to_string()).map_err(io)?;
         folder.unlock().map_err(|source| LockError::Io { path: path.display().to_string(), source })?;
-    } else {
-        // Absent or unreadable while a whole run holds the folder: refused below.
-        let running = std::fs::read_to_string(&count_path).ok().and_then(|t| t.trim().parse::<usize>().ok());
-        match running {
-            Some(n) if n != s.count => {
-                return Err(LockError::OtherCount {
-                    out: out.display().to_string(),
-                    running: n,
-                    index: s.index,
-                    count: s.count,
-                });
-            }
-            _ => {}
+        if !try_take(&folder, &path, true)? {
+            return Err(held(&path));
         }
-    }
-    if !try_take(&folder, &path, true)? {
-        return Err(held(&path));
+    } else {
+        // A whole run holds it exclusively; else shards do, of the count they wrote.
+        if !try_take(&folder, &path, true)? {
+            return Err(held(&path));
+        }
+        let running = std::fs::read_to_string(&count_path).ok().and_then(|t| t.trim().parse::<usize>().ok());
+        if let Some(n) = running.filter(|&n| n != s.count) {
+            return Err(LockError::OtherCount {
+                out: out.display().to_string(),
+                running: n,
+                index: s.index,
+                count: s.count,
+            });
+        }
     }
     let shard_path = out.join(shard_lock_file(s));
     let file = open(&shard_path)?;
