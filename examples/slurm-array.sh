@@ -5,7 +5,8 @@
 #
 # Each task converts shard $SLURM_ARRAY_TASK_ID of $SLURM_ARRAY_TASK_COUNT (smocap reads both from
 # the environment; subjects are kept whole and shards balanced by frame count), writes its
-# summary to <out>/reports/shard-<i>.json, and can be resubmitted: --resume skips trials already
+# summary to <out>/reports/shard-<i>.json (shards run side by side into one --out, each holding its
+# own lock; `smocap merge-reports <out>/reports/shard-*.json` joins them), and can be resubmitted: --resume skips trials already
 # converted from the same input. Exit code 3 marks a shard with failed trials (listed in its summary).
 #SBATCH --job-name=smocap-convert
 #SBATCH --cpus-per-task=8

@@ -115,6 +115,70 @@ fn two_converts_into_one_out_never_interleave_and_every_output_decodes_completel
     assert!(files(&out, ".partial").is_empty());
 }
 
+/// `smocap convert <toml> --out <out> --shard <shard> --quiet`, spawned, its summary in `rep`.
+fn spawn_shard(toml: &Path, out: &Path, shard: &str, rep: &Path) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_smocap"))
+        .args(["convert", toml.to_str().unwrap(), "--out", out.to_str().unwrap(), "--jobs", "1", "--quiet"])
+        .args(["--shard", shard, "--report-json", rep.to_str().unwrap()])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+#[test]
+fn different_shards_converting_into_one_out_at_once_both_succeed_with_their_own_summaries() {
+    // A synthetic dataset generated inside --out: both shards find it generated once.
+    let dir = tmp("shards-side-by-side");
+    let toml = dir.join("datasets.toml");
+    std::fs::write(&toml, "[[dataset]]\nname = \"syn\"\ntrials = [\"*/walk*.trc\"]\nsubject = \"{subject}/{trial}.trc\"\nstatic = \"{subject}/static.trc\"\nsynthetic = { subjects = 4, trials = 2, frames = 60, seed = 5 }\n")
+        .unwrap();
+    let out = dir.join("out");
+    let reps = [dir.join("r0.json"), dir.join("r1.json")];
+    let children = [spawn_shard(&toml, &out, "0/2", &reps[0]), spawn_shard(&toml, &out, "1/2", &reps[1])];
+    let mut trials = Vec::new();
+    for (c, rep) in children.into_iter().zip(&reps) {
+        let o = c.wait_with_output().unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        let r = report(rep);
+        assert!(r["shard"].as_str().is_some_and(|s| s.ends_with("/2")), "{r}");
+        trials.extend(statuses(rep).into_iter().map(|(t, st, _)| (t, st)));
+    }
+    trials.sort();
+    let want: Vec<(String, String)> =
+        (1..=4).flat_map(|s| (1..=2).map(move |k| (format!("subj{s:02}/walk{k:02}.trc"), "ok".to_string()))).collect();
+    assert_eq!(trials, want);
+    let mcaps = files(&out, ".mcap");
+    assert_eq!(mcaps.len(), 8);
+    for m in &mcaps {
+        decodes_completely(m);
+    }
+    assert!(files(&out, ".partial").is_empty());
+}
+
+#[test]
+fn two_runs_of_the_same_shard_never_interleave_and_every_output_decodes_completely() {
+    let (dir, toml) = archive("same-shard", 2, 3, 150);
+    let out = dir.join("out");
+    let (ra, rb) = (dir.join("a.json"), dir.join("b.json"));
+    let (a, b) = (spawn_shard(&toml, &out, "0/2", &ra), spawn_shard(&toml, &out, "0/2", &rb));
+    let (a, b) = (a.wait_with_output().unwrap(), b.wait_with_output().unwrap());
+    let codes = [a.status.code(), b.status.code()];
+    assert!(codes.contains(&Some(0)), "{codes:?}\n{}\n{}", stderr(&a), stderr(&b));
+    for o in [&a, &b] {
+        if !o.status.success() {
+            assert_eq!(o.status.code(), Some(1), "{}", stderr(o));
+            assert!(stderr(o).contains("another smocap convert is writing into this folder"), "{}", stderr(o));
+        }
+    }
+    let mcaps = files(&out, ".mcap");
+    assert_eq!(mcaps.len(), 3, "{mcaps:?}");
+    for m in &mcaps {
+        decodes_completely(m);
+    }
+    assert!(files(&out, ".partial").is_empty());
+}
+
 #[test]
 fn resume_redoes_an_output_whose_chunks_are_corrupt_though_its_summary_reads() {
     let (dir, toml) = archive("resume-corrupt", 1, 2, 60);

@@ -240,13 +240,13 @@ fn output_conflicts(datasets: &[Dataset], groups: &[SubjectGroup], out: &Path) -
 }
 
 /// Converts `datasets`; `log` receives one progress line per trial (and notes). Holds the
-/// output folder's lock ([`super::lock`]) for the whole run.
+/// output folder's locks ([`super::lock`]: the folder's, or the shard's) for the whole run.
 pub fn convert(
     datasets: &[Dataset],
     opt: &ConvertOptions,
     log: &(dyn Fn(&str) + Sync),
 ) -> Result<ConvertSummary, ConvertError> {
-    let _lock = super::lock::lock_out(&opt.out)?;
+    let _lock = super::lock::lock_out(&opt.out, opt.shard)?;
     let mut notes = Vec::new();
     let mut groups: Vec<SubjectGroup> = Vec::new();
     for (i, d) in datasets.iter().enumerate() {

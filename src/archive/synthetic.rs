@@ -26,11 +26,20 @@ fn cut(t: &MarkerTrial, a: usize, b: usize) -> MarkerTrial {
 }
 
 /// Writes the dataset under `root` as `subjNN/static.trc` (standing) and `subjNN/walkNN.trc` (mm), unless
-/// `root/.complete` says it was written with the same spec.
+/// `root/.complete` says it was written with the same spec. Runs that generate one root at once
+/// (shards of one archive started together) take turns on `root/.generate.lock`: one writes,
+/// the others then find it complete.
 pub fn generate(spec: &SyntheticSpec, root: &Path) -> anyhow::Result<()> {
     spec.validate().map_err(anyhow::Error::msg)?;
     let stamp = format!("{spec:?}");
     let marker = root.join(".complete");
+    if std::fs::read_to_string(&marker).is_ok_and(|s| s == stamp) {
+        return Ok(());
+    }
+    std::fs::create_dir_all(root)?;
+    let lock =
+        std::fs::OpenOptions::new().create(true).truncate(false).write(true).open(root.join(".generate.lock"))?;
+    lock.lock()?;
     if std::fs::read_to_string(&marker).is_ok_and(|s| s == stamp) {
         return Ok(());
     }

@@ -189,17 +189,20 @@ impl Survey {
                 l[(i, c)] += w;
             }
         }
-        let mut mean = &l * &mu;
-        let mut cov = &l * &sigma * l.transpose();
+        // Fixed-order products: the same bits on every CPU (`crate::solve::fixed`).
+        use crate::solve::fixed::{mul, mul_t, mul_v};
+        let mut mean = mul_v(&l, &mu);
+        let mut cov = mul_t(&mul(&l, &sigma), &l);
         if !known.is_empty() {
             let nk = known.len();
             let sel = DMatrix::from_fn(nk, k, |i, j| if known[i].0 == j { 1.0 } else { 0.0 });
-            let s_kk = &sel * &sigma * sel.transpose();
-            let s_dk = &l * &sigma * sel.transpose();
+            let s_kk = mul_t(&mul(&sel, &sigma), &sel);
+            let s_dk = mul_t(&mul(&l, &sigma), &sel);
             let resid = DVector::from_iterator(nk, known.iter().map(|&(c, v)| v - mu[c]));
             if let Some(inv) = s_kk.try_inverse() {
-                mean += &s_dk * &inv * resid;
-                cov -= &s_dk * &inv * s_dk.transpose();
+                let s_inv = mul(&s_dk, &inv);
+                mean += mul_v(&s_inv, &resid);
+                cov -= mul_t(&s_inv, &s_dk);
             }
         }
         (mean / 1000.0, cov / 1.0e6)

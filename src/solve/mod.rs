@@ -3,6 +3,7 @@
 //! ([`calibrate`]).
 
 pub mod calibrate;
+pub mod fixed;
 pub mod init;
 pub mod placement;
 pub mod presolve;

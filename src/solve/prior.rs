@@ -187,7 +187,7 @@ impl GlobalTerm for Anthropometric {
         let n = self.dims.len();
         let v = DVector::from_vec(self.survey_values(x.p));
         let r = &v - &self.mean;
-        let e = 0.5 * self.weight * (r.transpose() * &self.cov_inv * &r)[(0, 0)];
+        let e = 0.5 * self.weight * r.dot(&super::fixed::mul_v(&self.cov_inv, &r));
         if let Some((h, g)) = hg {
             let ns = x.scale.len();
             let mut jac = DMatrix::zeros(n, ns);
@@ -204,9 +204,10 @@ impl GlobalTerm for Anthropometric {
                     jac[(d, i)] = (hi[d] - lo[d]) / (2.0 * step);
                 }
             }
-            let jt_ci = jac.transpose() * &self.cov_inv * self.weight;
-            let hh = &jt_ci * &jac;
-            let gg = &jt_ci * &r;
+            // Fixed-order products: the same bits on every CPU (`super::fixed`).
+            let jt_ci = super::fixed::t_mul(&jac, &self.cov_inv) * self.weight;
+            let hh = super::fixed::mul(&jt_ci, &jac);
+            let gg = super::fixed::mul_v(&jt_ci, &r);
             for i in 0..ns {
                 g[i] += gg[i];
                 for j in 0..ns {

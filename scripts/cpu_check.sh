@@ -1,0 +1,68 @@
+#!/usr/bin/env bash
+# Same bytes on every CPU: builds smocap twice, as usual (matrixmultiply picks its f64 kernel at
+# run time: AVX-512, FMA+AVX2, AVX or generic) and with matrixmultiply forced to its generic
+# kernel (its documented build-time switch MMTEST_FEATURE, set to a feature no CPU has, in a
+# target folder of its own), converts the datasets of datasets.toml (the shared trials and the
+# embedded synthetic one) with both, exports every .mcap to .mot, and compares every file byte
+# for byte. Exit 0 when all are identical; 1 with the differing files otherwise.
+#
+#   bash scripts/cpu_check.sh            # from the repository root, ../shared beside it
+#
+# Uses the dev profile (as the tests); CARGO_TARGET_DIR is honoured for the normal build.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+NORMAL_TARGET=${CARGO_TARGET_DIR:-target}
+GENERIC_TARGET=${SMOCAP_CPU_CHECK_TARGET:-$NORMAL_TARGET/cpu-generic}
+WORK=$(mktemp -d "${TMPDIR:-/tmp}/smocap-cpu-check.XXXXXX")
+trap 'rm -rf "$WORK"' EXIT
+
+cargo build --locked --bin smocap
+MMTEST_FEATURE=generic CARGO_TARGET_DIR="$GENERIC_TARGET" cargo build --locked --bin smocap
+
+# The repository's datasets, and the shared OpenCap subject's walking2 trial (registration of 49
+# markers on the generic model: the calibration the issue found kernel-dependent).
+SHARED=$(cd .. && pwd)/shared/datasets
+cp datasets.toml "$WORK/datasets.toml"
+sed -i "s#\.\./shared/datasets#$SHARED#g" "$WORK/datasets.toml"
+if [ -d "$SHARED/opencap_addbiomechanics" ]; then
+    cat >>"$WORK/datasets.toml" <<TOML
+
+[[dataset]]
+name = "opencap_walking2"
+root = "$SHARED/opencap_addbiomechanics"
+trials = ["MarkerData/walking2.trc"]
+model = "$SHARED/opencap_addbiomechanics/unscaled_generic.osim"
+TOML
+fi
+
+run() { # run <binary> <folder>
+    local bin=$1 out=$2
+    # Exit 3 (some trial failed or is suspect) still writes every other output: compared too.
+    "$bin" convert "$WORK/datasets.toml" --out "$out" --jobs 2 --quiet --allow-empty >/dev/null || [ $? -eq 3 ]
+    find "$out" -name '*.mcap' -not -path '*/.synthetic/*' | sort | while read -r f; do
+        "$bin" export "$f" --mot "${f%.mcap}.mot" >/dev/null
+    done
+}
+run "$NORMAL_TARGET/debug/smocap" "$WORK/normal"
+run "$GENERIC_TARGET/debug/smocap" "$WORK/generic"
+
+status=0
+count=0
+while read -r rel; do
+    count=$((count + 1))
+    if ! cmp -s "$WORK/normal/$rel" "$WORK/generic/$rel"; then
+        echo "differs with the generic kernel: $rel"
+        status=1
+    fi
+done < <(cd "$WORK/normal" && find . \( -name '*.mcap' -o -name '*.mot' \) -not -path './.synthetic/*' | sort)
+missing=$(diff <(cd "$WORK/normal" && find . \( -name '*.mcap' -o -name '*.mot' \) | sort) \
+    <(cd "$WORK/generic" && find . \( -name '*.mcap' -o -name '*.mot' \) | sort) || true)
+if [ -n "$missing" ]; then
+    echo "the two builds wrote different files:"; echo "$missing"
+    status=1
+fi
+if [ "$count" -eq 0 ]; then
+    echo "cpu_check: no output to compare"; exit 1
+fi
+[ $status -eq 0 ] && echo "cpu_check: $count files identical with matrixmultiply's generic kernel"
+exit $status
