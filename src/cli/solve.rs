@@ -117,6 +117,10 @@ fn read_trial(
     for w in t.warnings.iter().filter(|w| w.contains("masked as gaps")) {
         eprintln!("warning: {}: {w}", path.display());
     }
+    // What a reader assumed to read a vendor's off-standard file (these name the file).
+    for w in t.warnings.iter().filter(|w| w.starts_with(&path.display().to_string())) {
+        eprintln!("warning: {w}");
+    }
     Ok((t, conv))
 }
 

@@ -4,6 +4,7 @@
 
 pub mod calibration;
 pub mod context;
+pub mod continuity;
 pub mod convention;
 pub mod device;
 pub mod export;

@@ -9,7 +9,9 @@
 //! their segments sharing the lanes, each trial's frames still leaving in its own frame order.
 
 use super::frames::{for_each_window, TrialFrames};
-use super::lanes::{resolve_outliers_above, run_lanes_across, FrameObservations, FrameResult, TrialInputs};
+use super::lanes::{
+    resolve_flips, resolve_outliers_above, run_lanes_across, FrameObservations, FrameResult, TrialInputs,
+};
 use super::matching::MarkerMatch;
 use super::stats::GapStats;
 use super::trial::{match_markers, no_match, GapRuns, SinkError, TrialError, TrialResult};
@@ -119,11 +121,14 @@ struct Orderer<'a> {
     /// Frames with too few markers waiting for the next solved frame.
     gap: Vec<(usize, FrameResult, Vec<f64>)>,
     bridged: usize,
+    /// Proxies unwrapped toward the previous solved frame ([`super::continuity`]).
+    periodic: Vec<usize>,
 }
 
 impl<'a> Orderer<'a> {
     fn new(ctx: &'a Context, calibrated: &'a [f64]) -> Orderer<'a> {
-        Orderer { ctx, calibrated, next: 0, early: BTreeMap::new(), last: None, gap: Vec::new(), bridged: 0 }
+        let periodic = super::continuity::periodic_proxies(&ctx.proxy);
+        Orderer { ctx, calibrated, next: 0, early: BTreeMap::new(), last: None, gap: Vec::new(), bridged: 0, periodic }
     }
 
     /// Takes frame `f`'s result; `obs` is the window it lies in, frame `f` at `f - first`.
@@ -137,12 +142,16 @@ impl<'a> Orderer<'a> {
         let mut observed = vec![0.0; 3 * obs.0.map.len()];
         obs.0.fill(f - obs.1, &mut observed);
         self.early.insert(f, (r, observed));
-        while let Some((r, observed)) = self.early.remove(&self.next) {
+        while let Some((mut r, observed)) = self.early.remove(&self.next) {
             let f = self.next;
             self.next += 1;
             if r.1.status == FrameStatus::TooFewMarkers {
                 self.gap.push((f, r, observed));
                 continue;
+            }
+            // Continuous angles: every output follows the frames handed on from here.
+            if let Some((_, prev)) = &self.last {
+                super::continuity::unwrap_towards(&mut r.0, prev, &self.periodic);
             }
             self.flush(Some((f, r.0.as_slice())), sink)?;
             self.last = Some((f, r.0.clone()));
@@ -528,7 +537,10 @@ fn presolve_pass(
         let obs = FrameObservations { trial: &w, map: &matched.columns };
         let inputs = base.inputs(obs);
         let end = job.bounds[g1 - 1].1;
-        let kept = resolve_outliers_above(eval, settings, &inputs, &rel, threshold, &mut job.held[w0..end]);
+        let mut kept = resolve_outliers_above(eval, settings, &inputs, &rel, threshold, &mut job.held[w0..end]);
+        kept.extend(resolve_flips(eval, settings, &inputs, &mut job.held[w0..end]));
+        kept.sort_unstable();
+        kept.dedup();
         job.presolved.extend(kept.into_iter().map(|f| f + w0));
         for f in job.bounds[g0].0..end {
             let r = job.held[f].take().expect("every frame lies in one segment");
