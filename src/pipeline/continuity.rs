@@ -31,8 +31,10 @@ pub fn periodic_proxies(proxy: &ProxyMap) -> Vec<usize> {
 /// Moves each of `periodic` in `p` by whole turns to the value nearest `prev`'s (rad).
 pub fn unwrap_towards(p: &mut [f64], prev: &[f64], periodic: &[usize]) {
     for &k in periodic {
-        if p[k].is_finite() && prev[k].is_finite() {
-            p[k] = prev[k] + wrap_angle(p[k] - prev[k]);
+        // Whole turns added only (a frame already nearest is left bit for bit as solved).
+        let turns = ((prev[k] - p[k]) / TAU).round();
+        if turns.is_finite() && turns != 0.0 {
+            p[k] += TAU * turns;
         }
     }
 }
