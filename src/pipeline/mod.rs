@@ -19,6 +19,7 @@ pub mod session;
 pub mod stats;
 pub mod stream;
 pub mod subject;
+pub mod subject_check;
 pub mod trial;
 pub mod verdict;
 
