@@ -266,6 +266,10 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
             );
         }
     }
+    if failed == report.trials.len() {
+        // Results, all suspect: exit 3 (some results are not trustworthy), not "nothing ran".
+        return Ok(super::EXIT_SOME_FAILED);
+    }
     Ok(super::exit_code(report.trials.len() - failed, failed, false))
 }
 
