@@ -379,3 +379,81 @@ fn random_byte_mutations_never_panic() {
     }
     println!("mutations: {ok} read, {err} rejected");
 }
+
+// ---- vendor quirks: each tolerance read with a warning naming the file ----
+
+/// Overwrites the value of `POINT:DATA_START` (an int16 after its 10-character name, the
+/// next-record offset, type, dimension count and dimension) in a built file.
+fn set_data_start_param(bytes: &mut [u8], proc: Proc, v: i16) {
+    let at = bytes.windows(10).position(|w| w == b"DATA_START").expect("a DATA_START parameter") + 10 + 5;
+    let b = if proc == Proc::Mips { v.to_be_bytes() } else { v.to_le_bytes() };
+    bytes[at..at + 2].copy_from_slice(&b);
+}
+
+#[test]
+fn units_cut_to_their_dimension_read_as_the_unit_they_begin() {
+    for (units, width, scale) in [("mete", 4, 1000.0), ("millimete", 9, 1.0), ("centim", 6, 10.0), ("inc", 3, 25.4)] {
+        let mut b = build(Proc::Intel, -1.0, vec!["A", "B"], &frames_abc());
+        b.params[4] = ("POINT", "UNITS", Val::Chars(vec![units], width));
+        let t = parse_c3d(&b.bytes(), "cut_units.c3d").unwrap();
+        let p = t.position(1, 0).unwrap();
+        assert!((p[0] - 11.0 * scale / 1000.0).abs() < 1e-9, "{units}: {p:?}");
+        assert_eq!(t.source_units, units);
+        let w = t.warnings.iter().find(|w| w.contains("POINT:UNITS")).expect("a warning");
+        assert!(w.starts_with("cut_units.c3d: ") && w.contains(units), "{w}");
+    }
+    // Too short to say, or no unit at all: still an error naming the file and the units.
+    for units in ["me", "furl"] {
+        let mut b = build(Proc::Intel, -1.0, vec!["A", "B"], &frames_abc());
+        b.params[4] = ("POINT", "UNITS", Val::Chars(vec![units], 4));
+        let e = parse_c3d(&b.bytes(), "bad_units.c3d").unwrap_err();
+        assert!(matches!(&e, C3dError::UnknownUnits { units: u, .. } if u == units), "{e}");
+        assert!(e.to_string().starts_with("bad_units.c3d: "), "{e}");
+    }
+}
+
+#[test]
+fn a_zero_or_wrong_data_start_parameter_gives_way_to_the_header_that_fits_the_file() {
+    for proc in [Proc::Intel, Proc::Mips] {
+        for param in [0i16, 1, 40] {
+            let mut bytes = build(proc, 0.5, vec!["A", "B"], &frames_abc()).bytes();
+            set_data_start_param(&mut bytes, proc, param);
+            let t = parse_c3d(&bytes, "phoenix.c3d").unwrap();
+            check_abc(&t, 0.5);
+            let w = t.warnings.iter().find(|w| w.contains("DATA_START")).expect("a warning");
+            assert!(w.starts_with("phoenix.c3d: ") && w.contains(&format!("is {param}")), "{w}");
+        }
+    }
+    // Both pointing nowhere sensible: a clean error.
+    let mut bytes = build(Proc::Intel, 0.5, vec!["A", "B"], &frames_abc()).bytes();
+    set_data_start_param(&mut bytes, Proc::Intel, 0);
+    bytes[16..18].copy_from_slice(&0i16.to_le_bytes());
+    let e = parse_c3d(&bytes, "nowhere.c3d").unwrap_err();
+    assert!(e.to_string().starts_with("nowhere.c3d: ") && e.to_string().contains("data start"), "{e}");
+}
+
+#[test]
+fn sgi_files_with_a_long_big_endian_parameter_section_read_as_their_intel_twins() {
+    // 120 labelled points: LABELS spans several blocks, so next-record offsets exceed 255 and
+    // their byte order matters; float and integer data; a subject's parameters too.
+    let names: Vec<&'static str> =
+        (0..120).map(|i| &*Box::leak(format!("MK{i:03}").into_boxed_str())).collect::<Vec<_>>();
+    let frame: Vec<[f64; 4]> = (0..120).map(|i| [i as f64, -(i as f64), 2.0 * i as f64, 1.0]).collect();
+    for scale in [0.5f32, -1.0] {
+        let build_for = |proc| {
+            let mut b = build(proc, scale, names.clone(), &[frame.clone(), frame.clone()]);
+            b.params[5] = ("POINT", "LABELS", Val::Chars(names.clone(), 5));
+            b.params.push(("SUBJECTS", "NAMES", Val::Chars(vec!["Pat"], 3)));
+            b.params.push(("PROCESSING", "Height", Val::Float(vec![1790.0])));
+            b.bytes()
+        };
+        let (sgi, intel) = (build_for(Proc::Mips), build_for(Proc::Intel));
+        assert_eq!(sgi[512 + 3], 86);
+        let (a, b) = (parse_c3d(&sgi, "sgi.c3d").unwrap(), parse_c3d(&intel, "pc.c3d").unwrap());
+        assert_eq!(a.labels.len(), 120);
+        assert_eq!(a.labels, b.labels);
+        assert_eq!(a.positions, b.positions);
+        let s = scale.abs() as f64 * if scale < 0.0 { 1.0 } else { 1.0 };
+        assert_eq!(a.position(1, 7), Some([7.0 * s / 1000.0, -7.0 * s / 1000.0, 14.0 * s / 1000.0]));
+    }
+}

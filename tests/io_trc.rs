@@ -334,3 +334,103 @@ fn marker_trial_helpers_work_on_a_read_file() {
     assert_eq!(s.frame_numbers, vec![2, 3]);
     assert_eq!(s.trajectory(1)[0], Some([0.007, 0.008, 0.009]));
 }
+
+// ---- Motion Analysis Cortex exports ----
+
+/// A Cortex-style export of `nm` markers over `frames` frames: the name row holds only the
+/// first `named` names (Cortex cuts it at a fixed length), `NumMarkers` says `num_markers`;
+/// marker `m` of frame `f` is at `(f + m, 2m, 3)` mm, the last marker missing in frame 0
+/// (its cells empty and the row ending early).
+fn cortex(nm: usize, named: usize, num_markers: usize, frames: usize) -> String {
+    let mut s = format!(
+        "PathFileType\t4\t(X/Y/Z)\tcortex.trc\nDataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\t\
+         OrigDataRate\tOrigDataStartFrame\tOrigNumFrames\n100.00\t100.00\t{frames}\t{num_markers}\tmm\t100.00\t1\t{frames}\n\
+         Frame#\tTime"
+    );
+    for m in 0..named {
+        s += &format!("\tMarker{m}\t\t");
+    }
+    s += "\n\t\t";
+    for m in 1..=named {
+        s += &format!("X{m}\tY{m}\tZ{m}\t");
+    }
+    s += "\n\n";
+    for f in 0..frames {
+        s += &format!("{}\t{:.3}", f + 1, f as f64 / 100.0);
+        let last = if f == 0 { nm - 1 } else { nm };
+        for m in 0..last {
+            s += &format!("\t{}\t{}\t3", f + m, 2 * m);
+        }
+        s += "\n";
+    }
+    s
+}
+
+fn check_cortex(t: &MarkerTrial, nm: usize, frames: usize) {
+    assert_eq!((t.n_frames(), t.n_markers()), (frames, nm));
+    assert_eq!(t.position(0, nm - 1), None);
+    assert!(close(
+        t.position(frames - 1, nm - 1).unwrap(),
+        [(frames - 1 + nm - 1) as f64 * 1e-3, 2e-3 * (nm - 1) as f64, 3e-3]
+    ));
+    assert!(close(t.position(2, 5).unwrap(), [7e-3, 10e-3, 3e-3]));
+    t.check_consistent().unwrap();
+}
+
+#[test]
+fn cortex_files_with_a_cut_off_name_row_read_every_marker_the_rows_carry() {
+    // As found: NumMarkers 66 above 33 names, rows of 68 markers.
+    let t = parse_trc(&cortex(68, 33, 66, 12), "cortex.trc").unwrap();
+    check_cortex(&t, 68, 12);
+    assert_eq!(&t.labels[..2], ["Marker0", "Marker1"]);
+    assert_eq!(t.labels[32], "Marker32");
+    // Stable names for the unnamed, by their 1-based column: the 34th marker is M034.
+    assert_eq!(t.labels[33], "M034");
+    assert_eq!(t.labels[67], "M068");
+    let w = t.warnings.iter().find(|w| w.contains("M034")).expect("a warning");
+    assert!(w.starts_with("cortex.trc: ") && w.contains("33") && w.contains("68"), "{w}");
+    // From disk, held whole or read back frame by frame: the same.
+    let dir = std::env::temp_dir().join(format!("smocap-trc-cortex-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("cortex.trc");
+    std::fs::write(&path, cortex(68, 33, 66, 12)).unwrap();
+    check_cortex(&read_trc(&path).unwrap(), 68, 12);
+    let (head, rows) = smocap::io::trc::scan_trc(&path, 3).unwrap();
+    assert!(head.positions.is_empty() && head.n_markers() == 68);
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&rows.read(0..12).unwrap()), bits(&t.positions));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn unlabelled_exports_are_read_with_numbered_markers_and_refused_by_the_solver() {
+    let t = parse_trc(&cortex(20, 0, 0, 5), "unlabelled.trc").unwrap();
+    check_cortex(&t, 20, 5);
+    assert_eq!(t.labels[0], "M001");
+    let w = t.warnings.iter().find(|w| w.contains("unlabelled")).expect("a warning");
+    assert!(w.starts_with("unlabelled.trc: "), "{w}");
+    let ctx = smocap::pipeline::Context::shipped().unwrap();
+    let e = smocap::pipeline::trial::match_markers(&ctx, "unlabelled", &t).unwrap_err();
+    assert!(e.to_string().contains("unlabelled") && e.to_string().contains("20 markers"), "{e}");
+}
+
+#[test]
+fn unnamed_markers_of_a_cut_off_row_never_match_model_markers() {
+    let mut text = cortex(8, 3, 8, 4);
+    text = text.replace("Marker0", "LASI").replace("Marker1", "RASI");
+    let t = parse_trc(&text, "cut.trc").unwrap();
+    let ctx = smocap::pipeline::Context::shipped().unwrap();
+    let m = smocap::pipeline::trial::match_markers(&ctx, "cut", &t).unwrap();
+    let matched: Vec<usize> = m.columns.iter().flatten().copied().collect();
+    assert_eq!(matched.len(), 2, "{matched:?}");
+    assert!(matched.iter().all(|&c| c < 2));
+    assert!(m.unmatched_trial.iter().all(|l| !l.starts_with("LASI")));
+}
+
+#[test]
+fn rows_wider_than_names_and_num_markers_agree_on_are_still_ragged() {
+    // NumMarkers equal to the names: no cut-off, so a wider row is an error with its line.
+    let e = parse_trc(&cortex(6, 5, 5, 3), "ragged.trc").unwrap_err();
+    assert!(matches!(e, TrcError::RaggedRow { n_markers: 5, .. }), "{e}");
+    assert!(e.to_string().starts_with("ragged.trc:"), "{e}");
+}

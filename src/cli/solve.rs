@@ -117,6 +117,10 @@ fn read_trial(
     for w in t.warnings.iter().filter(|w| w.contains("masked as gaps")) {
         eprintln!("warning: {}: {w}", path.display());
     }
+    // What a reader assumed to read a vendor's off-standard file (these name the file).
+    for w in t.warnings.iter().filter(|w| w.starts_with(&path.display().to_string())) {
+        eprintln!("warning: {w}");
+    }
     Ok((t, conv))
 }
 
@@ -151,6 +155,16 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
     for n in &notes {
         eprintln!("{n}");
     }
+    // What C3D files say of their subject: the prior's height and mass when none was given,
+    // and whether the trials are one person.
+    let mut paths: Vec<&std::path::Path> = a.trials.iter().map(|p| p.as_path()).collect();
+    paths.extend(static_path.as_deref());
+    let records = crate::pipeline::subject_check::subject_records(&paths);
+    let subject_note = crate::pipeline::subject_check::fill_from_records(&mut ctx.subject, &records);
+    if let Some(n) = &subject_note {
+        eprintln!("{n}");
+    }
+    let not_one_person = crate::pipeline::subject_check::inconsistencies(&records);
     let input_opt = crate::pipeline::convention::InputOptions { up: a.up, units: a.units };
     if let Some(t) = a.threads {
         anyhow::ensure!((1..=4096).contains(&t), "--threads {t}: expected 1 to 4096 threads");
@@ -193,11 +207,15 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         _ => Vec::new(),
     };
     let motions: Vec<(&str, &crate::io::MarkerTrial)> = loaded.iter().map(|(n, t, _)| (n.as_str(), t)).collect();
-    let calibrated = if statics.is_empty() && motions.is_empty() {
+    let mut calibrated = if statics.is_empty() && motions.is_empty() {
         None
     } else {
         Some(session::calibrate(&ctx, &statics, &motions))
     };
+    if let Some(Ok(c)) = &mut calibrated {
+        c.report.subject_from_files = subject_note;
+        c.mark_subject_suspect(not_one_person);
+    }
     if let Some(Ok(c)) = &calibrated {
         eprintln!("{}", c.report.summary());
         for w in &c.report.warnings {
@@ -240,12 +258,17 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
     let failed = report.trials.iter().filter(|t| t.status != "ok").count();
     if failed > 0 {
         eprintln!("{failed} of {} trials failed or are suspect", report.trials.len());
-        if failed == report.trials.len() {
+        // Every trial suspect (e.g. a suspect calibration) is exit 3, not an error.
+        if report.trials.iter().all(|t| t.status == "failed") {
             anyhow::bail!(
                 "every trial failed: {}",
                 report.trials.iter().filter_map(|t| t.error.clone()).collect::<Vec<_>>().join("; ")
             );
         }
+    }
+    if failed == report.trials.len() {
+        // Results, all suspect: exit 3 (some results are not trustworthy), not "nothing ran".
+        return Ok(super::EXIT_SOME_FAILED);
     }
     Ok(super::exit_code(report.trials.len() - failed, failed, false))
 }

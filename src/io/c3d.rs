@@ -10,6 +10,9 @@
 //! Positions are converted to metres from `POINT:UNITS`, in the file's lab frame.
 
 mod params;
+mod subject;
+
+pub use subject::{parse_subject, read_subject, C3dSubject};
 
 use std::path::Path;
 
@@ -237,19 +240,41 @@ fn layout(bytes: &[u8], len: u64, name_for_errors: &str) -> Result<(MarkerTrial,
             "mm".into()
         }
     };
-    let unit_scale =
-        units_to_metres(&units).ok_or_else(|| C3dError::UnknownUnits { file: file.clone(), units: clip(&units) })?;
+    let unit_scale = match units_to_metres(&units) {
+        Some(s) => s,
+        None => {
+            let (name, s) = truncated_units(&units)
+                .ok_or_else(|| C3dError::UnknownUnits { file: file.clone(), units: clip(&units) })?;
+            warnings.push(format!("{file}: POINT:UNITS {units:?} read as {name} (a unit name cut to its dimension)"));
+            s
+        }
+    };
     let per_m = per_metre(unit_scale);
 
     // Data block and size checks before any allocation sized by the file's counts.
-    let start_block = params.uint("POINT", "DATA_START").unwrap_or_else(|| u64::from(u16_at(hdr::DATA_START)));
+    let is_float = scale < 0.0;
+    let word = if is_float { 4u64 } else { 2 };
+    let stride = (n_points as u64 * 4).saturating_add(analog_words).saturating_mul(word);
+    let header_start = u64::from(u16_at(hdr::DATA_START));
+    let start_block = match params.uint("POINT", "DATA_START") {
+        None => header_start,
+        Some(p) if p == header_start => p,
+        Some(p) => {
+            let first_param = u64::from(bytes[0]);
+            let chosen = data_start(p, header_start, first_param, stride.saturating_mul(n_frames), len);
+            if chosen != p {
+                warnings.push(format!(
+                    "{file}: POINT:DATA_START is {p} but the header names block {header_start}; \
+                     block {chosen} read (the one consistent with the file's size)"
+                ));
+            }
+            chosen
+        }
+    };
     if start_block < 2 {
         return Err(bad(format!("data start block {start_block} is before the parameter section")));
     }
     let data_off = (start_block - 1) * 512;
-    let is_float = scale < 0.0;
-    let word = if is_float { 4u64 } else { 2 };
-    let stride = (n_points as u64 * 4).saturating_add(analog_words).saturating_mul(word);
     let needed = data_off.saturating_add(stride.saturating_mul(n_frames));
     if needed > len {
         let what = format!(
@@ -281,6 +306,44 @@ fn layout(bytes: &[u8], len: u64, name_for_errors: &str) -> Result<(MarkerTrial,
         per_m,
     };
     Ok((trial, frames))
+}
+
+/// Of the data start blocks named by `POINT:DATA_START` (`param`) and the header (`header`), the
+/// one consistent with a file of `len` bytes holding `data` bytes of frames after the parameter
+/// section (which starts at block `first_param`): past the parameter section, and the frames
+/// fitting in the file with the least left over; the parameter when neither or both fit alike.
+fn data_start(param: u64, header: u64, first_param: u64, data: u64, len: u64) -> u64 {
+    let slack = |b: u64| {
+        let end = b.saturating_sub(1).saturating_mul(512).saturating_add(data);
+        (b > first_param && end <= len).then(|| len - end)
+    };
+    match (slack(param), slack(header)) {
+        (None, Some(_)) => header,
+        (Some(p), Some(h)) if h < p => header,
+        _ => param,
+    }
+}
+
+/// A length unit cut short (C3D stores `POINT:UNITS` in as many characters as its dimension
+/// says: `mete`, `millimete`, `centim`), when at least three characters name one unit: its
+/// short name and metres per unit.
+fn truncated_units(units: &str) -> Option<(&'static str, f64)> {
+    let u = units.trim().to_ascii_lowercase();
+    if u.len() < 3 {
+        return None;
+    }
+    let families: [(&str, f64, &[&str]); 4] = [
+        ("mm", 1e-3, &["millimeters", "millimetres"]),
+        ("cm", 1e-2, &["centimeters", "centimetres"]),
+        ("m", 1.0, &["meters", "metres"]),
+        ("in", 0.0254, &["inches"]),
+    ];
+    let hits: Vec<(&'static str, f64)> =
+        families.iter().filter(|(_, _, long)| long.iter().any(|l| l.starts_with(&u))).map(|f| (f.0, f.1)).collect();
+    match hits.as_slice() {
+        [one] => Some(*one),
+        _ => None,
+    }
 }
 
 /// `POINT:LABELS`, `LABELS2`, `LABELS3`, ... concatenated, cut or padded (`POINT<i>`,

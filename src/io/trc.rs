@@ -256,6 +256,9 @@ struct Parser {
     /// Byte offset of the line being fed (set by the caller), and that of each frame's row.
     offset: u64,
     offsets: Vec<(u64, u32)>,
+    /// Data rows may carry more markers than line 4 names (a cut-off name row or an unlabelled
+    /// export): the markers named and `NumMarkers`.
+    widen: Option<(usize, Option<f64>)>,
 }
 
 impl Parser {
@@ -273,6 +276,7 @@ impl Parser {
             keep: usize::MAX,
             offset: 0,
             offsets: Vec::new(),
+            widen: None,
         }
     }
 
@@ -348,7 +352,15 @@ impl Parser {
         if nm == 0 {
             warnings.push("no marker labels".into());
         }
-        if let Some(n) = field("NumMarkers").and_then(|v| v.parse::<f64>().ok()) {
+        let num_markers = field("NumMarkers").and_then(|v| v.parse::<f64>().ok());
+        // Cortex cuts the name row at a fixed length (NumMarkers above the names) and writes
+        // unlabelled exports as `NumMarkers 0` without names: the data rows then say how many
+        // markers there are.
+        let widen = match num_markers {
+            Some(n) => n > nm as f64 || (n == 0.0 && nm == 0),
+            None => nm == 0,
+        };
+        if let Some(n) = num_markers.filter(|_| !widen) {
             if n != nm as f64 {
                 warnings.push(format!("NumMarkers says {n} but line 4 has {nm} labels; using the labels"));
             }
@@ -371,6 +383,7 @@ impl Parser {
         let num_frames = field("NumFrames").and_then(|v| v.parse::<f64>().ok());
         self.trial = MarkerTrial { labels, rate_hz, source_units: units, ..MarkerTrial::default() };
         self.header = Some(Header { per_m: per_metre(scale), first_data, num_frames });
+        self.widen = widen.then_some((nm, num_markers));
         Ok(())
     }
 
@@ -397,8 +410,13 @@ impl Parser {
         let non_numeric =
             |column: usize, value: &str| TrcError::NonNumeric { file: file.clone(), line, column, value: clip(value) };
         if c.len() > 2 + 3 * nm {
-            return Err(TrcError::RaggedRow { file: file.clone(), line, found: c.len() - 2, n_markers: nm });
+            if self.widen.is_none() {
+                return Err(TrcError::RaggedRow { file: file.clone(), line, found: c.len() - 2, n_markers: nm });
+            }
+            let held = if trial.times.len() <= self.keep { trial.times.len() } else { 0 };
+            widen_to(trial, (c.len() - 2).div_ceil(3), held);
         }
+        let nm = trial.labels.len();
         let frame_cell = c.first().copied().unwrap_or("");
         let frame = parse_frame(frame_cell).ok_or_else(|| non_numeric(1, frame_cell))?;
         let time_cell = c.get(1).copied().unwrap_or("");
@@ -457,8 +475,61 @@ impl Parser {
                 self.warnings.push(format!("NumFrames says {n} but {} data rows were read", trial.n_frames()));
             }
         }
+        if let Some((named, num_markers)) = self.widen {
+            let nm = trial.n_markers();
+            let file = &self.file;
+            let said = num_markers.map_or("no NumMarkers".to_string(), |n| format!("NumMarkers {n}"));
+            if named == 0 {
+                self.warnings.push(format!(
+                    "{file}: an unlabelled export ({said}, no marker names): its {nm} markers named \
+                     M001–{}; they match no model marker",
+                    unnamed_label(nm)
+                ));
+            } else if nm == named {
+                if let Some(n) = num_markers {
+                    self.warnings.push(format!("NumMarkers says {n} but line 4 has {nm} labels; using the labels"));
+                }
+            } else {
+                self.warnings.push(format!(
+                    "{file}: line 4 names {named} markers ({said}) but the data rows carry {nm}: \
+                     markers {}–{nm} named {}–{} (cut-off name row; they match no model marker)",
+                    named + 1,
+                    unnamed_label(named + 1),
+                    unnamed_label(nm)
+                ));
+            }
+        }
         trial.warnings = self.warnings;
         Ok(trial)
+    }
+}
+
+/// The name of unnamed marker `i` (1-based) of a TRC file whose name row is missing or cut off:
+/// `M034`. [`is_unnamed_label`] tells such names, which match no model marker.
+pub fn unnamed_label(i: usize) -> String {
+    format!("M{i:03}")
+}
+
+/// Whether `label` is a name [`unnamed_label`] gives (`M` and three or more digits).
+pub fn is_unnamed_label(label: &str) -> bool {
+    label.len() >= 4 && label.starts_with('M') && label[1..].bytes().all(|b| b.is_ascii_digit())
+}
+
+/// Widens `trial` to `nm` markers, the new ones named by [`unnamed_label`] and unobserved in the
+/// `frames` frames held so far.
+fn widen_to(trial: &mut MarkerTrial, nm: usize, frames: usize) {
+    let old = trial.labels.len();
+    if nm <= old {
+        return;
+    }
+    trial.labels.extend((old + 1..=nm).map(unnamed_label));
+    {
+        let mut wide = Vec::with_capacity(frames * 3 * nm);
+        for f in 0..frames {
+            wide.extend_from_slice(&trial.positions[f * 3 * old..(f + 1) * 3 * old]);
+            wide.resize(wide.len() + 3 * (nm - old), f64::NAN);
+        }
+        trial.positions = wide;
     }
 }
 

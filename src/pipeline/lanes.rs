@@ -14,6 +14,7 @@
 //! trials and short trials together fill a GPU batch. A lane's result depends only on its
 //! segment, so it is the same whatever else is in the queue.
 
+use super::continuity::{max_jump, FLIP_RAD};
 use crate::io::MarkerTrial;
 use crate::kinematics::assembly::{fold_tracking_reference, Evaluator, FrameProblem};
 use crate::kinematics::backend::{BackendError, BatchBackend, EnergyEval, GnSink, GnView};
@@ -348,6 +349,56 @@ pub fn resolve_outliers_above(
             } else {
                 r.2 += spent;
             }
+        }
+    }
+    kept
+}
+
+/// True flips ([`super::continuity`]): a solved frame whose rotational proxies differ from the
+/// previous solved frame's by more than [`FLIP_RAD`] (whole turns aside) is solved again from
+/// that neighbour's pose; the re-solve is kept when it is continuous and fits the markers about
+/// as well (RMSE within 10 % or 0.5 mm of the flipped one's), and the next frames are retried
+/// the same way while they still jump. Frames are visited in order on the CPU (deterministic);
+/// the time spent is added to the frame's. Returns the frames whose re-solve was kept.
+pub fn resolve_flips(
+    eval: &Evaluator<'_>,
+    settings: &SolverSettings,
+    inp: &TrialInputs<'_>,
+    results: &mut [Option<FrameResult>],
+) -> Vec<usize> {
+    let mut kept = Vec::new();
+    let mut lane: Option<Lane<'_>> = None;
+    let mut prev: Option<usize> = None;
+    for f in 0..results.len() {
+        let Some((p, old, _)) = solved(&results[f]) else { continue };
+        let Some(g) = prev.replace(f) else { continue };
+        let neighbour = results[g].as_ref().expect("a solved frame").0.clone();
+        if max_jump(eval.proxy, &neighbour, p).0 <= FLIP_RAD || old.rmse_m.is_nan() {
+            continue;
+        }
+        let old_rmse = old.rmse_m;
+        let lane = lane.get_or_insert_with(|| Lane::new(eval, settings));
+        lane.prev = Some(neighbour.clone());
+        lane.prev2 = None;
+        lane.frame = f;
+        lane.start_frame(inp, false);
+        let frame = FrameProblem {
+            observed: &lane.obs,
+            marker_weights: inp.marker_weights,
+            tracking_ref: &lane.reference,
+            tracking_weights: inp.tracking_weights_all,
+        };
+        let stats = lane.solver.solve(&frame, &mut lane.p);
+        lane.it = None;
+        let spent = lane.started.elapsed().as_secs_f64();
+        let r = results[f].as_mut().expect("a solved frame");
+        let continuous = max_jump(eval.proxy, &neighbour, &lane.p).0 <= FLIP_RAD;
+        let fits = stats.rmse_m <= (1.1 * old_rmse).max(old_rmse + 5e-4);
+        if stats.status != FrameStatus::TooFewMarkers && continuous && fits {
+            *r = (lane.p.clone(), stats, r.2 + spent);
+            kept.push(f);
+        } else {
+            r.2 += spent;
         }
     }
     kept

@@ -186,7 +186,8 @@ pub fn match_names(model: &[&str], labels: &[String]) -> Result<MarkerMatch, Mat
 pub fn match_names_with(model: &[&str], labels: &[String], synonyms: &Synonyms) -> Result<MarkerMatch, MatchError> {
     let mut columns: Vec<Option<usize>> = vec![None; model.len()];
     let mut kinds: Vec<Option<MatchKind>> = vec![None; model.len()];
-    let mut used = vec![false; labels.len()];
+    // Markers a reader named itself (a TRC name row cut off, an unlabelled export) match nothing.
+    let mut used: Vec<bool> = labels.iter().map(|l| crate::io::trc::is_unnamed_label(l)).collect();
     for kind in MatchKind::ALL {
         // Candidates of this pass, checked in both directions before any is taken.
         let mut claimed: Vec<Option<usize>> = vec![None; labels.len()];

@@ -4,6 +4,7 @@
 
 pub mod calibration;
 pub mod context;
+pub mod continuity;
 pub mod convention;
 pub mod device;
 pub mod export;
@@ -19,6 +20,7 @@ pub mod session;
 pub mod stats;
 pub mod stream;
 pub mod subject;
+pub mod subject_check;
 pub mod trial;
 pub mod verdict;
 

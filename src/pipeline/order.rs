@@ -44,6 +44,10 @@ pub(crate) struct Orderer<'a> {
     /// Per proxy: the last frame that observed it, and its value there.
     last_seen: Vec<Option<(usize, f64)>>,
     pub(crate) bridged: usize,
+    /// Proxies unwrapped toward the previous solved frame ([`super::continuity`]).
+    periodic: Vec<usize>,
+    /// The last solved frame's proxies, as solved (unwrapped).
+    last: Option<Vec<f64>>,
 }
 
 impl<'a> Orderer<'a> {
@@ -57,6 +61,8 @@ impl<'a> Orderer<'a> {
             moves: markers_moved(ctx),
             last_seen: vec![None; ctx.proxy.np()],
             bridged: 0,
+            periodic: super::continuity::periodic_proxies(&ctx.proxy),
+            last: None,
         }
     }
 
@@ -71,10 +77,17 @@ impl<'a> Orderer<'a> {
         let mut observed = vec![0.0; 3 * obs.0.map.len()];
         obs.0.fill(f - obs.1, &mut observed);
         self.early.insert(f, (r, observed));
-        while let Some(((proxies, stats, seconds), observed)) = self.early.remove(&self.next) {
+        while let Some(((mut proxies, stats, seconds), observed)) = self.early.remove(&self.next) {
             let index = self.next;
             self.next += 1;
             let bridged = stats.status == FrameStatus::TooFewMarkers;
+            // Continuous angles: every output follows the frames handed on from here.
+            if !bridged {
+                if let Some(prev) = &self.last {
+                    super::continuity::unwrap_towards(&mut proxies, prev, &self.periodic);
+                }
+                self.last = Some(proxies.clone());
+            }
             let markers = &self.ctx.model.markers;
             let seen = |m: &usize| markers[*m].weight > 0.0 && observed[3 * *m].is_finite();
             let open: Vec<usize> = (0..self.moves.len())

@@ -133,6 +133,10 @@ pub struct CalibrationReport {
     /// The static trial's posture (mean angles of its calibration frames), when there was one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub static_posture: Option<crate::solve::prior::StaticPostureReport>,
+    /// Height and mass the anthropometric prior took from the files (C3D `PROCESSING`), when
+    /// the user gave none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub subject_from_files: Option<String>,
 }
 
 impl CalibrationReport {
@@ -181,6 +185,7 @@ impl CalibrationReport {
             registration: cal.registration_report.clone(),
             functional_centres: cal.functional_centres.clone(),
             static_posture: (cal.static_frames > 0).then(|| cal.posture.clone()),
+            subject_from_files: None,
         }
     }
 }

@@ -56,12 +56,28 @@ pub struct Calibrated {
     pub ctx: Context,
     pub calibration: Calibration,
     pub report: CalibrationReport,
+    /// Why the trials calibrated together are not one person
+    /// ([`super::subject_check::inconsistencies`]); empty when nothing says so.
+    pub subject_suspect: Vec<String>,
 }
 
 impl Calibrated {
     /// Why the calibration cannot be trusted (empty when it can): every trial is then `suspect`.
     pub fn suspect(&self) -> Vec<String> {
-        self.calibration.suspect()
+        let mut out = self.calibration.suspect();
+        out.extend(self.subject_suspect.iter().cloned());
+        out
+    }
+
+    /// Marks the calibration `suspect` because its trials are not one person (`why`), in its
+    /// report too.
+    pub fn mark_subject_suspect(&mut self, why: Vec<String>) {
+        if why.is_empty() {
+            return;
+        }
+        self.report.status = "suspect".into();
+        self.report.warnings.extend(why.iter().cloned());
+        self.subject_suspect = why;
     }
 }
 
@@ -74,7 +90,8 @@ pub fn calibrate(
 ) -> Result<Calibrated, SetupError> {
     let (calibration, placed) = calibrate_placed_with(ctx, statics, motions)?;
     let report = CalibrationReport::new(ctx, &calibration);
-    Ok(Calibrated { ctx: placed.unwrap_or_else(|| ctx.clone()), calibration, report })
+    let ctx = placed.unwrap_or_else(|| ctx.clone());
+    Ok(Calibrated { ctx, calibration, report, subject_suspect: Vec::new() })
 }
 
 /// A solved trial that is a result (`ok` or `suspect`): its report entry, its frames, and lines

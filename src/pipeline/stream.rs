@@ -10,7 +10,9 @@
 //! their segments sharing the lanes, each trial's frames still leaving in its own frame order.
 
 use super::frames::{for_each_window, TrialFrames};
-use super::lanes::{resolve_outliers_above, run_lanes_across, FrameObservations, FrameResult, TrialInputs};
+use super::lanes::{
+    resolve_flips, resolve_outliers_above, run_lanes_across, FrameObservations, FrameResult, TrialInputs,
+};
 use super::matching::MarkerMatch;
 use super::order::Orderer;
 use super::stats::GapStats;
@@ -441,7 +443,10 @@ fn presolve_pass(
         let obs = FrameObservations { trial: &w, map: &matched.columns };
         let inputs = base.inputs(obs);
         let end = job.bounds[g1 - 1].1;
-        let kept = resolve_outliers_above(eval, settings, &inputs, &rel, threshold, &mut job.held[w0..end]);
+        let mut kept = resolve_outliers_above(eval, settings, &inputs, &rel, threshold, &mut job.held[w0..end]);
+        kept.extend(resolve_flips(eval, settings, &inputs, &mut job.held[w0..end]));
+        kept.sort_unstable();
+        kept.dedup();
         job.presolved.extend(kept.into_iter().map(|f| f + w0));
         for f in job.bounds[g0].0..end {
             let r = job.held[f].take().expect("every frame lies in one segment");

@@ -25,6 +25,8 @@ pub enum TrialError {
     Matching { trial: String, source: MatchError },
     #[error("trial '{trial}': reading its frames: {why}")]
     Read { trial: String, why: String },
+    #[error("trial '{trial}' is unlabelled: its {markers} markers have no names (an unlabelled export, named M001… on reading); label it (e.g. in the capture software) before solving")]
+    Unlabelled { trial: String, markers: usize },
     #[error("trial '{trial}' has no frames")]
     Empty { trial: String },
     #[error("trial '{trial}': no frame has at least {min} observed markers with a weight above 0, nothing to solve")]
@@ -72,6 +74,10 @@ pub struct TrialResult {
 /// For each model marker, the trial column that observes it (see [`super::matching`]); `name`
 /// names the trial in errors.
 pub fn match_markers(ctx: &Context, name: &str, trial: &MarkerTrial) -> Result<MarkerMatch, TrialError> {
+    let unnamed = trial.labels.iter().all(|l| crate::io::trc::is_unnamed_label(l));
+    if unnamed && !trial.labels.is_empty() {
+        return Err(TrialError::Unlabelled { trial: name.into(), markers: trial.labels.len() });
+    }
     let names: Vec<&str> = ctx.model.markers.iter().map(|m| m.name.as_str()).collect();
     match_names_with(&names, &trial.labels, &ctx.synonyms())
         .map_err(|source| TrialError::Matching { trial: name.into(), source })
