@@ -453,7 +453,7 @@ fn sgi_files_with_a_long_big_endian_parameter_section_read_as_their_intel_twins(
         assert_eq!(a.labels.len(), 120);
         assert_eq!(a.labels, b.labels);
         assert_eq!(a.positions, b.positions);
-        let s = scale.abs() as f64 * if scale < 0.0 { 1.0 } else { 1.0 };
+        let s = scale.abs() as f64;
         assert_eq!(a.position(1, 7), Some([7.0 * s / 1000.0, -7.0 * s / 1000.0, 14.0 * s / 1000.0]));
     }
 }
