@@ -20,6 +20,10 @@ pub struct PreviewArgs {
     /// Frames shown per camera, evenly spaced over the trial (first and last included).
     #[arg(long, default_value_t = 6)]
     pub frames: usize,
+    /// The trial's worst frames (highest marker RMSE, one per event) shown besides, with a red
+    /// border.
+    #[arg(long, default_value_t = 2)]
+    pub worst: usize,
     /// Width of one tile (px); its height follows the camera's aspect ratio.
     #[arg(long, default_value_t = 240)]
     pub tile_width: u32,
@@ -31,8 +35,13 @@ pub fn run(a: PreviewArgs) -> anyhow::Result<u8> {
     let rec = crate::archive::export::read_trial_record(&a.file)?;
     let take = render::Take::from_record(&rec, &a.file)?;
     let cams = render::cameras(&take, a.cameras.as_deref(), a.rig_seed)?;
-    let layout = render::preview::write_contact_sheet(&take, &cams, a.frames, a.tile_width, &a.out)?;
+    anyhow::ensure!(a.worst <= 100, "--worst {}: expected 0 to 100", a.worst);
+    let (layout, shown) = render::preview::write_contact_sheet(&take, &cams, a.frames, a.worst, a.tile_width, &a.out)?;
     let (w, h) = layout.size();
     eprintln!("wrote {} ({w} × {h} px: {} cameras × {} frames)", a.out.display(), layout.rows, layout.columns);
+    for f in shown.iter().filter(|f| f.worst) {
+        let rmse = f.rmse_mm.map_or("-".into(), |r| format!("{r:.1} mm"));
+        eprintln!("  red border: frame {} (t = {:.2} s), marker RMSE {rmse}", f.index, f.time);
+    }
     Ok(0)
 }
