@@ -24,6 +24,9 @@ MMTEST_FEATURE=generic CARGO_TARGET_DIR="$GENERIC_TARGET" cargo build --locked -
 SHARED=$(cd .. && pwd)/shared/datasets
 cp datasets.toml "$WORK/datasets.toml"
 sed -i "s#\.\./shared/datasets#$SHARED#g" "$WORK/datasets.toml"
+# The synthetic dataset is generated into one folder both builds read (by default each run
+# generates it under its own --out, and the source path the .mcap records would differ).
+sed -i "s#^name = \"synthetic\"#name = \"synthetic\"\nroot = \"$WORK/synthetic-data\"#" "$WORK/datasets.toml"
 if [ -d "$SHARED/opencap_addbiomechanics" ]; then
     cat >>"$WORK/datasets.toml" <<TOML
 

@@ -133,3 +133,54 @@ fn a_subject_folder_mixing_two_peoples_trials_is_suspect_and_one_persons_is_not(
     assert!(from.contains("height 1.505 m") && from.contains("mass 48.0 kg"), "{from}");
     let _ = std::fs::remove_dir_all(&d);
 }
+
+#[test]
+fn converting_a_subject_folder_that_mixes_two_people_makes_its_trials_suspect() {
+    let d = dir("convert");
+    for (sub, files) in [
+        ("mixed", [("ann", "Ann", 1505.0, 3), ("bob", "Bob", 1790.0, 5)]),
+        ("ann", [("a1", "Ann", 1505.0, 3), ("a2", "Ann", 1515.0, 4)]),
+    ] {
+        std::fs::create_dir_all(d.join("data").join(sub)).unwrap();
+        for (stem, name, h, seed) in files {
+            write_c3d(
+                &d.join("data").join(sub).join(format!("{stem}.c3d")),
+                &trial(seed, if name == "Bob" { 0.1 } else { 0.0 }),
+                name,
+                h,
+                60.0,
+            );
+        }
+    }
+    std::fs::write(
+        d.join("datasets.toml"),
+        "[[dataset]]\nname = \"lab\"\nroot = \"data\"\ntrials = [\"*/*.c3d\"]\nsubject = \"{subject}/{trial}.c3d\"\n",
+    )
+    .unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_smocap"))
+        .arg("convert")
+        .arg(d.join("datasets.toml"))
+        .arg("--out")
+        .arg(d.join("out"))
+        .arg("--report-json")
+        .arg(d.join("summary.json"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("summary.json")).unwrap()).unwrap();
+    let trials = summary["trials"].as_array().unwrap();
+    assert_eq!(trials.len(), 4, "{summary}");
+    for t in trials {
+        let why = t["error"].as_str().unwrap_or_default();
+        if t["subject"] == "mixed" {
+            assert_eq!(t["status"], "suspect", "{t}");
+            assert!(why.contains("SUBJECTS:NAMES") && why.contains("Ann") && why.contains("Bob"), "{why}");
+        } else {
+            assert!(!why.contains("SUBJECTS:NAMES") && !why.contains("PROCESSING:Height"), "{t}");
+        }
+    }
+    assert!(err.contains("height 1.505 m"), "the prior took the recorded height: {err}");
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -420,6 +420,14 @@ fn subject(
         Ok(s) => s,
         Err(e) => return [outcomes, fail_all(format!("subject setup: {e}"))].concat(),
     };
+    // What C3D files say of their subject (as `solve`): the prior's height and mass where the
+    // dataset gives none, and whether the subject's trials (done ones too) are one person.
+    let paths: Vec<&Path> = g.trials.iter().map(|t| t.path.as_path()).chain(sub.static_path.as_deref()).collect();
+    let records = crate::pipeline::subject_check::subject_records(&paths);
+    if let Some(n) = crate::pipeline::subject_check::fill_from_records(&mut sub.ctx.subject, &records) {
+        log(&format!("note: {}/{}: {n}", d.name, g.subject));
+    }
+    let not_one_person = crate::pipeline::subject_check::inconsistencies(&records);
     if !d.settings.is_empty() {
         match sub.ctx.settings.with_overrides(&d.settings) {
             Ok(s) => sub.ctx.settings = s,
@@ -471,7 +479,12 @@ fn subject(
             .ok()
             .and_then(|(m, _)| super::trial_job::compress_model(&m));
             let settings_json = serde_json::to_string_pretty(&ctx.settings).unwrap_or_default();
-            Calibrated { base: sub.ctx, placed, calibration, settings_json, scaled_model }
+            let mut suspect = calibration.suspect();
+            suspect.extend(not_one_person);
+            for w in &suspect {
+                log(&format!("warning: {}/{}: suspect calibration: {w}", d.name, g.subject));
+            }
+            Calibrated { base: sub.ctx, placed, calibration, settings_json, scaled_model, suspect }
         }
         Err(why) => return [outcomes, fail_all(why)].concat(),
     };

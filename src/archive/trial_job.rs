@@ -31,6 +31,10 @@ pub struct Calibrated {
     pub settings_json: String,
     /// The scaled model (`.osim` text), zstd-compressed ([`compress_model`]) once per subject.
     pub scaled_model: Option<Vec<u8>>,
+    /// Why the calibration cannot be trusted ([`crate::solve::Calibration::suspect`], and trials that are not
+    /// one person's, [`crate::pipeline::subject_check::inconsistencies`]): every trial of the
+    /// subject is then `suspect`. Empty when it can.
+    pub suspect: Vec<String>,
 }
 
 /// zstd level of the scaled-model attachment, compressed once per subject: 3. On gait2354's
@@ -287,7 +291,11 @@ fn finish_trial(
     };
     solved?;
     let mut run = job.run.clone();
-    let verdict = match (c.judge.verdict(), c.pose.finish().suspect) {
+    let mut doubts = c.pose.finish().suspect;
+    if !cal.suspect.is_empty() {
+        doubts.push(format!("suspect calibration: {}", cal.suspect.join("; ")));
+    }
+    let verdict = match (c.judge.verdict(), doubts) {
         (v, pose) if pose.is_empty() => v,
         (Verdict::Ok, pose) => Verdict::Suspect(pose.join("; ")),
         (Verdict::Suspect(why), pose) => Verdict::Suspect(format!("{why}; {}", pose.join("; "))),
