@@ -105,7 +105,11 @@ impl<'a> Params<'a> {
             let off_at = at + 2 + n_chars;
             let next = proc.i16(take(off_at, 2, "next-record offset")?);
             if id < 0 {
-                groups.push((-id, name));
+                // Group −128 has no parameter that could name it (ids are at most 127).
+                match id.checked_neg() {
+                    Some(g) => groups.push((g, name)),
+                    None => params.warnings.push(format!("group {name} with id {id} ignored")),
+                }
             } else if id > 0 {
                 let kind = take(off_at + 2, 1, "type")?[0] as i8;
                 if !matches!(kind, -1 | 1 | 2 | 4) {
@@ -203,5 +207,35 @@ impl<'a> Params<'a> {
     /// A char parameter as one string (the first, for multi-string parameters).
     pub(super) fn string(&self, group: &str, name: &str) -> Option<String> {
         self.strings(group, name)?.into_iter().next()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A parameter section (block 2) of group records `(id, name)` after a header block.
+    fn section(records: &[(i8, &str)]) -> Vec<u8> {
+        let mut b = vec![0u8; 512];
+        b[0] = 2;
+        b[1] = 0x50;
+        b.extend([1, 0x50, 1, 84]);
+        for (i, (id, name)) in records.iter().enumerate() {
+            b.push(name.len() as u8);
+            b.push(*id as u8);
+            b.extend(name.as_bytes());
+            let next: i16 = if i + 1 == records.len() { 0 } else { 3 };
+            b.extend(next.to_le_bytes());
+            b.push(0);
+        }
+        b.resize(1024, 0);
+        b
+    }
+
+    #[test]
+    fn a_group_id_of_minus_128_is_ignored_with_a_warning_not_a_panic() {
+        let bytes = section(&[(-1, "POINT"), (-128, "ODD")]);
+        let p = Params::parse(&bytes, "odd.c3d").expect("parses");
+        assert!(p.warnings.iter().any(|w| w.contains("ODD") && w.contains("-128")), "{:?}", p.warnings);
     }
 }
