@@ -11,6 +11,7 @@ pub mod export;
 pub mod frames;
 pub mod ik_tasks;
 pub mod joint_centres;
+pub mod label_qc;
 pub mod lanes;
 pub mod matching;
 pub mod order;
