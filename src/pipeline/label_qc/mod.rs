@@ -208,19 +208,21 @@ pub fn screen_trial(ctx: &Context, trial: &dyn TrialFrames, columns: &[Option<us
     let pairs = sampler.rigid(settings);
     let mut scr = Screen::new(model, &used, pairs, settings.threshold_mm * 1e-3);
     // Pass 2: the per-frame screen, detections grouped into spans.
+    let threshold = settings.threshold_mm * 1e-3;
     let mut spans = Spans::new(settings.max_gap_frames);
     let mut seen = vec![false; nm];
     for_each_window(trial, |w0, w| {
         for f in 0..w.n_frames() {
             fill(w, f, columns, &mut x);
             scr.frame(&x);
-            spans.add(w0 + f, &scr.findings, &seen);
+            spans.add(w0 + f, &scr.findings, &seen, &scr.previous, threshold);
             for (s, p) in seen.iter_mut().zip(&x) {
                 *s = p[0].is_finite();
             }
         }
     })?;
     let mut raw = spans.finish();
+    raw.retain(|s| s.detected >= settings.min_frames.max(1) && s.abrupt);
     // Pass 3: a swap is repaired only where the exchange fits over its whole span.
     if raw.iter().any(|s| s.b.is_some()) {
         for_each_window(trial, |w0, w| {
@@ -330,6 +332,8 @@ struct Span {
     after: f64,
     /// Swaps: whether the exchange fits in every frame of the span (pass 3).
     fits: bool,
+    /// Jumps: whether the marker fitted in the frame before the span (or was not seen).
+    abrupt: bool,
 }
 
 /// Detections grouped into spans as frames go by.
@@ -344,8 +348,9 @@ impl Spans {
         Spans { gap, open: Vec::new(), done: Vec::new() }
     }
 
-    /// Frame `f`'s findings; `seen[m]`: marker `m` was observed in frame `f − 1`.
-    fn add(&mut self, f: usize, found: &screen::Findings, seen: &[bool]) {
+    /// Frame `f`'s findings; `seen[m]`: marker `m` was observed in frame `f − 1`, where its score
+    /// was `previous[m]`.
+    fn add(&mut self, f: usize, found: &screen::Findings, seen: &[bool], previous: &[f64], threshold: f64) {
         let gap = self.gap;
         let (open, done) = (&mut self.open, &mut self.done);
         let mut i = 0;
@@ -368,8 +373,12 @@ impl Spans {
                     s.after += after;
                 }
                 None => {
-                    let kind = if kind == EventKind::Jump && f > 0 && !seen[a] { EventKind::Ghost } else { kind };
-                    open.push(Span { kind, a, b, range: f..f + 1, detected: 1, before, after, fits: true });
+                    let ghost = kind == EventKind::Jump && f > 0 && !seen[a];
+                    // A jump starts from a frame where the marker fitted: a misfit that grows
+                    // (soft tissue at an impact) is not one.
+                    let abrupt = b.is_some() || ghost || f == 0 || previous[a] < before - 0.5 * threshold;
+                    let kind = if ghost { EventKind::Ghost } else { kind };
+                    open.push(Span { kind, a, b, range: f..f + 1, detected: 1, before, after, fits: true, abrupt });
                 }
             }
         }
@@ -407,4 +416,23 @@ impl TrialFrames for Screened<'_> {
     fn window_frames(&self) -> usize {
         self.inner.window_frames()
     }
+
+    fn label_qc(&self) -> Option<&LabelQc> {
+        Some(&self.qc)
+    }
+}
+
+/// `trial` screened as `ctx.settings.label_qc` says, its repairs applied as its windows are
+/// read; `trial` itself when screening is off or its markers do not match the model's.
+pub fn screened<'a>(
+    ctx: &Context,
+    name: &str,
+    trial: Box<dyn TrialFrames + 'a>,
+) -> Result<Box<dyn TrialFrames + 'a>, String> {
+    if ctx.settings.label_qc.mode == QcMode::Off {
+        return Ok(trial);
+    }
+    let Ok(matched) = super::trial::match_markers(ctx, name, trial.header()) else { return Ok(trial) };
+    let qc = screen_trial(ctx, trial.as_ref(), &matched.columns)?;
+    Ok(Box::new(Screened { inner: trial, qc, columns: matched.columns }))
 }

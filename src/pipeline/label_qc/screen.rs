@@ -21,12 +21,17 @@ pub(crate) struct Screen {
     /// Per marker: the indices of its rigid pairs.
     partners: Vec<Vec<usize>>,
     /// Per marker: the markers whose label it may have exchanged with (its left/right mirror,
-    /// markers on its body or the bodies next to it).
+    /// markers on its body or bodies up to two joints away).
     candidates: Vec<Vec<usize>>,
     threshold: f64,
     work: Vec<[f64; 3]>,
     flagged: Vec<usize>,
     considered: Vec<usize>,
+    /// Every marker's score in the frame screened last, and in the frame before.
+    pub(crate) scores: Vec<f64>,
+    pub(crate) previous: Vec<f64>,
+    /// The previous frame as screened (exchanges applied, masks as gaps).
+    last: Vec<[f64; 3]>,
     scratch: Vec<f64>,
     pub(crate) findings: Findings,
 }
@@ -61,6 +66,9 @@ impl Screen {
             work: vec![[f64::NAN; 3]; nm],
             flagged: Vec::with_capacity(nm),
             considered: Vec::with_capacity(nm),
+            scores: vec![0.0; nm],
+            previous: vec![0.0; nm],
+            last: vec![[f64::NAN; 3]; nm],
             scratch: Vec::with_capacity(nm),
             findings: Findings::default(),
         }
@@ -103,43 +111,60 @@ impl Screen {
         self.partners[m].iter().map(|&k| self.excess(k, x)).filter(|e| !e.is_nan()).sum()
     }
 
-    /// Markers flagged in `x`, into `self.flagged`.
-    fn flag(&mut self, x: &[[f64; 3]]) {
+    /// Markers whose score in `x` is above the threshold, into `self.flagged`; with `record`,
+    /// every marker's score into `self.scores`.
+    fn flag(&mut self, x: &[[f64; 3]], record: bool) {
         let mut flagged = std::mem::take(&mut self.flagged);
         flagged.clear();
         for m in 0..x.len() {
-            if !self.partners[m].is_empty() && self.score(m, x) > self.threshold {
+            let s = if self.partners[m].is_empty() { 0.0 } else { self.score(m, x) };
+            if record {
+                self.scores[m] = s;
+            }
+            if s > self.threshold {
                 flagged.push(m);
             }
         }
         self.flagged = flagged;
     }
 
-    /// Screens frame `x` (model-marker order, NaN where missing): fills [`Self::findings`].
+    /// The markers of the pairs whose excess in `x` is above the threshold, into
+    /// `self.considered` (sorted).
+    fn touched(&mut self, x: &[[f64; 3]]) {
+        let mut t = std::mem::take(&mut self.considered);
+        t.clear();
+        for k in 0..self.pairs.len() {
+            if self.excess(k, x) > self.threshold {
+                t.push(self.pairs[k].a);
+                t.push(self.pairs[k].b);
+            }
+        }
+        t.sort_unstable();
+        t.dedup();
+        self.considered = t;
+    }
+
+    /// Screens frame `x` (model-marker order, NaN where missing): fills [`Self::findings`], and
+    /// every marker's score in [`Self::scores`] (the previous frame's in [`Self::previous`]).
     pub(crate) fn frame(&mut self, x: &[[f64; 3]]) {
         self.findings.swaps.clear();
         self.findings.masks.clear();
-        self.flag(x);
-        if self.flagged.is_empty() {
+        std::mem::swap(&mut self.scores, &mut self.previous);
+        self.flag(x, true);
+        self.touched(x);
+        if self.considered.is_empty() {
+            self.last.copy_from_slice(x);
             return;
         }
         let mut work = std::mem::take(&mut self.work);
         work.copy_from_slice(x);
-        // Exchanges, best first, of a flagged marker or one of its rigid partners (the label that
-        // moved may sit where its own partners still agree) with a candidate: the exchange that
-        // removes the most misfit from the pairs it touches, leaving both within the threshold.
+        // Exchanges, best first, of a marker of a pair that does not fit with a candidate (its
+        // left/right mirror, a marker on its body or the next): the exchange that removes the
+        // most misfit from the pairs it touches (more than twice the threshold, three quarters
+        // of it at least) and leaves both within the threshold.
         for _ in 0..4 {
             let mut best: Option<(usize, usize, f64, f64, f64)> = None;
-            let mut considered = std::mem::take(&mut self.considered);
-            considered.clear();
-            for &a in &self.flagged {
-                considered.push(a);
-                for &k in &self.partners[a] {
-                    considered.push(if self.pairs[k].a == a { self.pairs[k].b } else { self.pairs[k].a });
-                }
-            }
-            considered.sort_unstable();
-            considered.dedup();
+            let considered = std::mem::take(&mut self.considered);
             for &a in &considered {
                 if !work[a][0].is_finite() {
                     continue;
@@ -153,14 +178,29 @@ impl Screen {
                     let load = self.load(a, &work) + self.load(b, &work);
                     work.swap(a, b);
                     let (sa, sb) = (self.score(a, &work), self.score(b, &work));
-                    let gain = load - self.load(a, &work) - self.load(b, &work);
+                    let left = self.load(a, &work) + self.load(b, &work);
+                    // How far the exchanged labels are from where the previous frame had them:
+                    // of two exchanges that fit alike (a mirror-symmetric marker set), the one
+                    // that keeps the labels' paths continuous.
+                    let step = |m: usize| {
+                        let d = distance(&work[m], &self.last[m]);
+                        if d.is_finite() {
+                            d
+                        } else {
+                            0.0
+                        }
+                    };
+                    let jumps = step(a) + step(b);
                     work.swap(a, b);
+                    let gain = load - left;
+                    let rank = gain - jumps;
                     if sa <= self.threshold
                         && sb <= self.threshold
                         && gain > 2.0 * self.threshold
-                        && best.is_none_or(|bst| gain > bst.2)
+                        && left <= 0.25 * load
+                        && best.is_none_or(|bst| rank > bst.2)
                     {
-                        best = Some((a.min(b), a.max(b), gain, before / 2.0, (sa + sb) / 2.0));
+                        best = Some((a.min(b), a.max(b), rank, before / 2.0, (sa + sb) / 2.0));
                     }
                 }
             }
@@ -168,15 +208,15 @@ impl Screen {
             let Some((a, b, _, before, after)) = best else { break };
             work.swap(a, b);
             self.findings.swaps.push((a, b, before, after));
-            self.flag(&work);
-            if self.flagged.is_empty() {
+            self.touched(&work);
+            if self.considered.is_empty() {
                 break;
             }
         }
-        // What no exchange explains: mask the marker that carries the most misfit, until none
-        // is flagged.
+        // What no exchange explains: mask the marker that carries the most misfit, while one
+        // scores above the threshold.
         for _ in 0..6 {
-            self.flag(&work);
+            self.flag(&work, false);
             if self.flagged.is_empty() {
                 break;
             }
@@ -191,6 +231,7 @@ impl Screen {
             self.findings.masks.push((pick.0, score));
             work[pick.0] = [f64::NAN; 3];
         }
+        self.last.copy_from_slice(&work);
         self.work = work;
     }
 

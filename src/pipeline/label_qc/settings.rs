@@ -35,9 +35,13 @@ pub struct LabelQcSettings {
     /// A pair's distance error counts beyond this many of its robust standard deviations (floor
     /// 1 mm). Default 5.
     pub noise_sds: f64,
-    /// Detections of the same swap or jump this many frames apart or fewer are one span.
-    /// Default 3.
+    /// Detections of the same swap or jump this many frames apart or fewer are one span (a swap
+    /// is not seen while the two markers are close, e.g. feet side by side; the frames between
+    /// are checked again before a span is repaired). Default 10.
     pub max_gap_frames: usize,
+    /// Spans detected in fewer frames than this are not events (a labelling error lasts; a
+    /// single frame's or two's misfit is noise). Default 3.
+    pub min_frames: usize,
     /// Frames sampled (evenly over the trial) for the reference distances. Default 2000.
     pub sample_frames: usize,
     /// The trial is `suspect` when more than this share of its frames had a marker masked.
@@ -52,7 +56,8 @@ impl Default for LabelQcSettings {
             threshold_mm: 30.0,
             rigid_sd_mm: 8.0,
             noise_sds: 5.0,
-            max_gap_frames: 3,
+            max_gap_frames: 10,
+            min_frames: 3,
             sample_frames: 2000,
             suspect_masked_share: 0.05,
         }
