@@ -13,6 +13,7 @@ pub mod ik_tasks;
 pub mod joint_centres;
 pub mod label_qc;
 pub mod lanes;
+pub mod marker_errors;
 pub mod matching;
 pub mod order;
 pub mod plausibility;

@@ -70,6 +70,10 @@ pub struct TrialReport {
     /// ([`super::label_qc`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub label_qc: Option<super::label_qc::LabelQc>,
+    /// Per-marker RMSE and maximum (anatomical and tracking markers), and the worst frames
+    /// ([`super::marker_errors`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub marker_errors: Option<super::marker_errors::MarkerErrorTable>,
 }
 
 /// Totals over the run.
@@ -254,6 +258,7 @@ impl Report {
             scale_error_pct: None,
             plausibility: None,
             label_qc: None,
+            marker_errors: None,
         }
     }
 
@@ -340,6 +345,7 @@ pub fn trial_report(ctx: &Context, r: &TrialResult, truth: Option<&Truth>) -> Tr
         scale_error_pct,
         plausibility: Some(pose_plausibility(ctx, r)),
         label_qc: None,
+        marker_errors: Some(r.marker_errors.clone()),
     }
 }
 

@@ -138,6 +138,7 @@ pub fn solve_judged(
     if !r.presolved.is_empty() {
         notes.push(format!("{name}: {} outlier frames improved by pre-solve", r.presolved.len()));
     }
+    notes.extend(r.marker_errors.lines(name));
     let mut report = trial_report(ctx, &r, truth);
     report.input = Some(input.clone());
     // Suspect: the trial's frames (mostly at the iteration cap) or its subject's calibration.
