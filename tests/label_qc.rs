@@ -164,6 +164,13 @@ fn angle_rmse(ctx: &Context, s: &Synthetic, t: &MarkerTrial, mode: QcMode) -> (f
     let qc = screen_in_place(&ctx, &mut t, &m.columns).expect("screen");
     let cal = calibrate_subject(&ctx, &[("trial", &t)]).expect("calibration");
     let r = solve_trial(&ctx, "trial", &t, &cal, 2).expect("solve");
+    // The per-marker error table: every weighted marker once, its maximum at least its RMSE.
+    let table = &r.marker_errors;
+    assert_eq!(table.anatomical.len() + table.tracking.len(), ctx.model.markers.len());
+    assert!(!table.anatomical.is_empty() && !table.tracking.is_empty());
+    assert!(table.anatomical.iter().chain(&table.tracking).all(|e| e.max_mm >= e.rmse_mm && e.frames > 0));
+    assert_eq!(table.worst_frames.len(), smocap::pipeline::marker_errors::WORST_FRAMES);
+    assert!(table.worst_frames.windows(2).all(|w| w[0].rmse_mm >= w[1].rmse_mm));
     let rep = smocap::pipeline::report::trial_report(&ctx, &r, Some(&s.truth));
     (rep.pose_error_deg.expect("truth given").rmse, qc)
 }

@@ -1,25 +1,29 @@
 //! Label quality control: swapped labels, jumps and ghosts found in a trial's markers before it
-//! is calibrated and solved, repaired or masked, and reported.
+//! is calibrated and solved, repaired or masked, and reported (`docs/LABEL_QC.md`).
 //!
 //! The screen needs no solve. Markers on one body, or on bodies one or two joints apart, whose
 //! distance stays the same over the trial (robust spread ≤ `rigid_sd_mm` on frames sampled over
-//! it, [`rigid`]) are *rigid pairs*; in each frame every marker gets a score, the median over
-//! its observed rigid partners of how far their distance is from the trial's (beyond
-//! `noise_sds` of the pair's spread). A clean frame ends there (a few hundred distances).
-//! Where a marker scores above `threshold_mm` ([`screen`]):
-//! - **swaps**: the exchange of two labels (a marker and its left/right mirror by name, or a
-//!   marker on the same or an adjacent body) that brings both within the threshold and lowers
-//!   their scores by more than it, best first;
-//! - **jumps and ghosts**: what is still flagged after the exchanges, masked greedily (the marker
-//!   with the largest misfit first); a *ghost* is a jump that starts as the label reappears after
+//! it, [`rigid`]) are *rigid pairs*. A pair's *excess* in a frame is how far its distance is from
+//! the trial's beyond `noise_sds` of its spread; a marker's *score* is the median excess over its
+//! observed rigid partners. A frame in which no pair's excess passes `threshold_mm` is clean and
+//! costs a few hundred distances. Otherwise ([`screen`]):
+//! - **swaps**: the markers of the misfitting pairs are tried exchanged with their candidates (the
+//!   left/right mirror by name, markers on bodies up to two joints away); an exchange that leaves
+//!   both scores within the threshold and removes most of the excess of the pairs it touches is
+//!   taken, the one removing the most (less how far it moves the labels from the previous frame's
+//!   positions: a mirror-symmetric marker set is told apart by the labels' paths) first;
+//! - **jumps and ghosts**: what still scores above the threshold is masked greedily (the marker
+//!   with the largest excess first); a *ghost* is a jump that starts as the label reappears after
 //!   a gap ("a label that appears far from where its marker was").
 //!
-//! Detections of the same exchange or marker at most `max_gap_frames` apart form one span. A
-//! swap is *repaired* (the two labels exchanged over the span) when the exchanged fit is within
-//! the threshold in every frame of the span where both are observed, otherwise both markers are
-//! *masked* over the span; jumps and ghosts are masked over their span. With `mode = flag` the
-//! events are reported and nothing is changed. Every decision depends on the trial's frames alone
-//! (three passes over its windows), never on threads, lanes or windows.
+//! Detections of the same exchange or marker at most `max_gap_frames` apart form one span; spans
+//! detected in fewer than `min_frames` frames, and jumps whose marker already misfitted in the
+//! frame before (a misfit that grows, not a label error), are dropped. A swap is *repaired* (the
+//! two labels exchanged over the span) when the exchanged fit is within the threshold in every
+//! frame of the span where both are observed, otherwise both markers are *masked* over the span;
+//! jumps and ghosts are masked over their span. With `mode = flag` the events are reported and
+//! nothing is changed. Every decision depends on the trial's frames alone (three passes over its
+//! windows), never on threads, lanes or windows.
 
 pub mod rigid;
 pub mod screen;

@@ -37,9 +37,10 @@ pub(crate) fn tree_distance(model: &Model, a: usize, b: usize) -> usize {
 /// Candidate pairs among the `used` markers: on one body or bodies at most two joints apart.
 pub(crate) fn candidate_pairs(model: &Model, used: &[bool]) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
-    for a in 0..used.len() {
-        for b in a + 1..used.len() {
-            if used[a] && used[b] && tree_distance(model, model.markers[a].body, model.markers[b].body) <= 2 {
+    let markers = &model.markers;
+    for (a, ma) in markers.iter().enumerate().filter(|(a, _)| used[*a]) {
+        for (b, mb) in markers.iter().enumerate().skip(a + 1).filter(|(b, _)| used[*b]) {
+            if tree_distance(model, ma.body, mb.body) <= 2 {
                 out.push((a, b));
             }
         }
@@ -63,7 +64,7 @@ impl PairSampler {
 
     /// Frame `f` of the trial, positions in model-marker order (NaN where not observed).
     pub(crate) fn frame(&mut self, f: usize, x: &[[f64; 3]]) {
-        if f % self.stride != 0 {
+        if !f.is_multiple_of(self.stride) {
             return;
         }
         for (k, &(a, b)) in self.pairs.iter().enumerate() {

@@ -165,12 +165,12 @@ impl Screen {
         for _ in 0..4 {
             let mut best: Option<(usize, usize, f64, f64, f64)> = None;
             let considered = std::mem::take(&mut self.considered);
+            let candidates = std::mem::take(&mut self.candidates);
             for &a in &considered {
                 if !work[a][0].is_finite() {
                     continue;
                 }
-                for j in 0..self.candidates[a].len() {
-                    let b = self.candidates[a][j];
+                for &b in &candidates[a] {
                     if !work[b][0].is_finite() || (b < a && considered.binary_search(&b).is_ok()) {
                         continue;
                     }
@@ -205,6 +205,7 @@ impl Screen {
                 }
             }
             self.considered = considered;
+            self.candidates = candidates;
             let Some((a, b, _, before, after)) = best else { break };
             work.swap(a, b);
             self.findings.swaps.push((a, b, before, after));
