@@ -93,6 +93,10 @@ pub struct TrialOutcome {
     /// The evaluation backend that solved it: `cpu`, or `wgpu: <adapter description>`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub backend: Option<String>,
+    /// Label quality control events: swaps, jumps, ghosts and what was done
+    /// ([`crate::pipeline::label_qc`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub label_qc: Vec<crate::pipeline::label_qc::LabelEvent>,
 }
 
 /// A dataset's fate (skipped ones say why: its root is absent; failed ones too: a bad glob, a
@@ -349,6 +353,7 @@ fn outcome(
         iterations: None,
         rmse_mm: None,
         backend: None,
+        label_qc: Vec::new(),
     }
 }
 
@@ -610,6 +615,7 @@ fn trial_outcome(
             iterations: Some(s.iterations),
             rmse_mm: s.rmse_mm,
             backend: Some(backend.into()),
+            label_qc: s.label_qc.clone(),
             ..outcome(d, g, t, out, if s.suspect.is_some() { "suspect" } else { "ok" }, s.suspect.clone())
         },
         Err(e) => failed(d, g, t, out, e),

@@ -73,6 +73,19 @@ pub fn open_for(
     input: &InputOptions,
     window: usize,
 ) -> Result<Box<dyn TrialFrames>, String> {
+    // Label quality control before anything reads the frames (calibration, solve).
+    let name = path.display().to_string();
+    crate::pipeline::label_qc::screened(ctx, &name, open_unscreened(d, ctx, path, input, window)?)
+}
+
+/// [`open_for`] without label quality control.
+fn open_unscreened(
+    d: &Dataset,
+    ctx: &Context,
+    path: &Path,
+    input: &InputOptions,
+    window: usize,
+) -> Result<Box<dyn TrialFrames>, String> {
     let file = MarkerFile::open(path, window).map_err(|e| e.to_string())?;
     if file.held() {
         let mut t = file.trial;
@@ -104,6 +117,8 @@ pub struct Solved {
     /// Why the result is `suspect` ([`crate::pipeline::verdict`]); recorded in the file's
     /// `smocap.run` metadata as `verdict` and `verdict_reason`.
     pub suspect: Option<String>,
+    /// Label quality control events (recorded in the file's `smocap.run` as `label_qc`, JSON).
+    pub label_qc: Vec<crate::pipeline::label_qc::LabelEvent>,
 }
 
 /// Solves `trial` and streams it to `out` (via its `.partial` file); `run` is the `smocap.run`
@@ -291,7 +306,12 @@ fn finish_trial(
     };
     solved?;
     let mut run = job.run.clone();
+    let qc = job.trial.label_qc();
     let mut doubts = c.pose.finish().suspect;
+    if let Some(q) = qc {
+        run.insert("label_qc".into(), serde_json::to_string(q).unwrap_or_default());
+        doubts.extend(q.suspect.iter().cloned());
+    }
     if !cal.suspect.is_empty() {
         doubts.push(format!("suspect calibration: {}", cal.suspect.join("; ")));
     }
@@ -321,5 +341,6 @@ fn finish_trial(
         iterations: P50P90::of(&it),
         rmse_mm: (!rmse.is_empty()).then(|| P50P90::of(&rmse)),
         suspect: verdict.reason(),
+        label_qc: qc.map(|q| q.events.clone()).unwrap_or_default(),
     })
 }

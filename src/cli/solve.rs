@@ -102,6 +102,12 @@ pub struct SolveArgs {
     /// pre-solves every warm-started frame. Overrides the profile's `presolve` (default `auto`).
     #[arg(long, value_enum)]
     pub presolve: Option<crate::solve::Presolve>,
+    /// Label quality control before calibrating and solving: `off`; `flag` reports swapped
+    /// labels, jumps and ghosts (the trial is then `suspect`); `repair` (default) exchanges
+    /// swapped labels back and masks what cannot be repaired. Overrides the profile's
+    /// `label_qc.mode`.
+    #[arg(long, value_enum)]
+    pub label_qc: Option<crate::pipeline::label_qc::QcMode>,
     #[command(flatten)]
     pub backend: super::BackendArgs,
 }
@@ -152,6 +158,9 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
     if let Some(mode) = a.presolve {
         ctx.settings.presolve = mode;
     }
+    if let Some(mode) = a.label_qc {
+        ctx.settings.label_qc.mode = mode;
+    }
     for n in &notes {
         eprintln!("{n}");
     }
@@ -196,7 +205,10 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
     for p in &a.trials {
         let name = p.display().to_string();
         match read_trial(&ctx, p, &input_opt) {
-            Ok((t, conv)) => loaded.push((name, t, conv)),
+            Ok((mut t, conv)) => {
+                let qc = session::screen_labels(&ctx, &name, &mut t);
+                loaded.push((name, t, conv, qc));
+            }
             Err(e) => report.push(Report::failed(&name, super::one_line(&e))),
         }
     }
@@ -206,7 +218,7 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
         (Some(p), Some(st)) => vec![(p.to_str().unwrap_or("static"), st)],
         _ => Vec::new(),
     };
-    let motions: Vec<(&str, &crate::io::MarkerTrial)> = loaded.iter().map(|(n, t, _)| (n.as_str(), t)).collect();
+    let motions: Vec<(&str, &crate::io::MarkerTrial)> = loaded.iter().map(|(n, t, ..)| (n.as_str(), t)).collect();
     let mut calibrated = if statics.is_empty() && motions.is_empty() {
         None
     } else {
@@ -232,14 +244,15 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
     let (mut chosen, lanes) = a.backend.choose(ctx, threads)?;
     report.set_backend(&chosen, lanes);
     let mut solved = Vec::new();
-    for (name, t, conv) in &loaded {
+    for (name, t, conv, qc) in &loaded {
         let result = match &calibrated {
             Some(Ok(c)) => session::solve_judged(c, name, t, conv, threads, lanes, chosen.backend(), truth.as_ref()),
             Some(Err(e)) => Err(format!("calibration failed: {e}")),
             None => Err("no calibration".into()),
         };
         match result {
-            Ok(j) => {
+            Ok(mut j) => {
+                session::attach_label_qc(&mut j, qc.clone());
                 for n in &j.notes {
                     eprintln!("{n}");
                 }

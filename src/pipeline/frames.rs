@@ -20,6 +20,10 @@ pub trait TrialFrames: Sync {
     fn window(&self, range: Range<usize>) -> Result<Cow<'_, MarkerTrial>, String>;
     /// Frames per window that bound what a window holds (`usize::MAX` when held whole).
     fn window_frames(&self) -> usize;
+    /// The label quality control applied to the frames, if any ([`super::label_qc::Screened`]).
+    fn label_qc(&self) -> Option<&super::label_qc::LabelQc> {
+        None
+    }
 }
 
 impl TrialFrames for MarkerTrial {

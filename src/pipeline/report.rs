@@ -66,6 +66,14 @@ pub struct TrialReport {
     /// Joint angles against what a person does: ranges, limits, jumps, left/right differences.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plausibility: Option<super::plausibility::PosePlausibility>,
+    /// Label quality control: swaps, jumps and ghosts found, and what was done
+    /// ([`super::label_qc`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub label_qc: Option<super::label_qc::LabelQc>,
+    /// Per-marker RMSE and maximum (anatomical and tracking markers), and the worst frames
+    /// ([`super::marker_errors`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub marker_errors: Option<super::marker_errors::MarkerErrorTable>,
 }
 
 /// Totals over the run.
@@ -249,6 +257,8 @@ impl Report {
             pose_error_deg: None,
             scale_error_pct: None,
             plausibility: None,
+            label_qc: None,
+            marker_errors: None,
         }
     }
 
@@ -334,6 +344,8 @@ pub fn trial_report(ctx: &Context, r: &TrialResult, truth: Option<&Truth>) -> Tr
         pose_error_deg,
         scale_error_pct,
         plausibility: Some(pose_plausibility(ctx, r)),
+        label_qc: None,
+        marker_errors: Some(r.marker_errors.clone()),
     }
 }
 

@@ -6,6 +6,7 @@
 //! frames at the iteration cap or a suspect calibration make it `suspect`.
 
 use super::convention::{conform_trial, InputConventions, InputOptions};
+use super::label_qc::LabelQc;
 use super::report::{trial_report, CalibrationReport, TrialReport};
 use super::subject::{calibrate_placed_with, SetupError};
 use super::verdict::{mask_implausible, Judge, Verdict};
@@ -137,6 +138,7 @@ pub fn solve_judged(
     if !r.presolved.is_empty() {
         notes.push(format!("{name}: {} outlier frames improved by pre-solve", r.presolved.len()));
     }
+    notes.extend(r.marker_errors.lines(name));
     let mut report = trial_report(ctx, &r, truth);
     report.input = Some(input.clone());
     // Suspect: the trial's frames (mostly at the iteration cap) or its subject's calibration.
@@ -153,6 +155,34 @@ pub fn solve_judged(
         report.error = Some(why);
     }
     Ok(JudgedTrial { report, result: r, notes })
+}
+
+/// Screens the labels of `trial` (held whole, in the model's conventions) as
+/// `ctx.settings.label_qc` says, repairing and masking in place ([`super::label_qc`]); `None`
+/// when its markers do not match the model's (solving it then says why) or screening is off.
+pub fn screen_labels(ctx: &Context, name: &str, trial: &mut MarkerTrial) -> Option<LabelQc> {
+    if ctx.settings.label_qc.mode == super::label_qc::QcMode::Off {
+        return None;
+    }
+    let matched = super::trial::match_markers(ctx, name, trial).ok()?;
+    super::label_qc::screen_in_place(ctx, trial, &matched.columns).ok()
+}
+
+/// Puts a trial's label QC into its report entry: its events as notes, and the trial `suspect`
+/// when the QC says so.
+pub fn attach_label_qc(j: &mut JudgedTrial, qc: Option<LabelQc>) {
+    let Some(qc) = qc else { return };
+    let name = j.report.trial.clone();
+    j.notes.extend(qc.lines(&name));
+    if let Some(why) = &qc.suspect {
+        j.notes.push(format!("warning: {name}: suspect: {why}"));
+        j.report.status = "suspect".into();
+        j.report.error = Some(match j.report.error.take() {
+            Some(e) => format!("{e}; {why}"),
+            None => why.clone(),
+        });
+    }
+    j.report.label_qc = Some(qc);
 }
 
 /// The verdict on a solved trial ([`super::verdict`]).

@@ -545,7 +545,9 @@ pub fn solve_trial_with(
     let mut stats = Vec::with_capacity(n);
     let mut frame_seconds = Vec::with_capacity(n);
     let mut bridged = Vec::new();
+    let mut errors = super::marker_errors::MarkerErrors::new(ctx, calibration);
     let mut sink = |f: SolvedFrame| -> Result<(), SinkError> {
+        errors.frame(f.index, &f.proxies, &f.observed, f.bridged || f.stats.status == FrameStatus::TooFewMarkers);
         if f.bridged {
             bridged.push(f.index);
         }
@@ -569,5 +571,6 @@ pub fn solve_trial_with(
         gaps: s.gaps,
         wall_seconds: s.wall_seconds,
         threads: s.threads,
+        marker_errors: errors.finish(),
     })
 }

@@ -69,6 +69,8 @@ pub struct TrialResult {
     /// Wall time of all frames (s), calibration excluded.
     pub wall_seconds: f64,
     pub threads: usize,
+    /// Per-marker RMSE and maximum, and the worst frames ([`super::marker_errors`]).
+    pub marker_errors: super::marker_errors::MarkerErrorTable,
 }
 
 /// For each model marker, the trial column that observes it (see [`super::matching`]); `name`

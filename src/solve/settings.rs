@@ -170,6 +170,9 @@ pub struct SolverSettings {
     /// 34–35 mm and its knee markers up to 45 mm for subject01); beyond that, the marker is not
     /// where the model thinks (a mislabelled or misplaced marker, or a model that does not fit).
     pub registration_suspect_mm: f64,
+    /// Label quality control of every trial before it is calibrated and solved (swapped labels,
+    /// jumps, ghosts: `crate::pipeline::label_qc`); `--label-qc` sets its mode.
+    pub label_qc: crate::pipeline::label_qc::LabelQcSettings,
 }
 
 impl Default for SolverSettings {
@@ -212,6 +215,7 @@ impl Default for SolverSettings {
             anisotropy_sd: 0.05,
             static_posture_sd_deg: 5.0,
             registration_suspect_mm: 50.0,
+            label_qc: Default::default(),
         }
     }
 }

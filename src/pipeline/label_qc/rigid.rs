@@ -1,0 +1,111 @@
+//! The trial's rigid marker pairs: markers on one body or on bodies one or two joints apart
+//! whose distance stays the same over the trial (robust spread at most `rigid_sd_mm`), with
+//! that distance and spread measured on frames sampled evenly over the trial.
+
+use super::LabelQcSettings;
+use crate::model::Model;
+
+/// One rigid pair: model markers `a < b`, their distance (m) and tolerance (m): `noise_sds`
+/// robust standard deviations.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Pair {
+    pub a: usize,
+    pub b: usize,
+    pub reference: f64,
+    pub tolerance: f64,
+}
+
+/// Joints between two bodies of the tree.
+pub(crate) fn tree_distance(model: &Model, a: usize, b: usize) -> usize {
+    let chain = |mut x: usize| {
+        let mut c = vec![x];
+        while let Some(p) = model.bodies[x].parent {
+            c.push(p);
+            x = p;
+        }
+        c
+    };
+    let (ca, cb) = (chain(a), chain(b));
+    for (i, x) in ca.iter().enumerate() {
+        if let Some(j) = cb.iter().position(|y| y == x) {
+            return i + j;
+        }
+    }
+    usize::MAX
+}
+
+/// Candidate pairs among the `used` markers: on one body or bodies at most two joints apart.
+pub(crate) fn candidate_pairs(model: &Model, used: &[bool]) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    let markers = &model.markers;
+    for (a, ma) in markers.iter().enumerate().filter(|(a, _)| used[*a]) {
+        for (b, mb) in markers.iter().enumerate().skip(a + 1).filter(|(b, _)| used[*b]) {
+            if tree_distance(model, ma.body, mb.body) <= 2 {
+                out.push((a, b));
+            }
+        }
+    }
+    out
+}
+
+/// Collects each candidate pair's distances on sampled frames, then keeps the rigid ones.
+pub(crate) struct PairSampler {
+    pairs: Vec<(usize, usize)>,
+    samples: Vec<Vec<f64>>,
+    stride: usize,
+}
+
+impl PairSampler {
+    pub(crate) fn new(pairs: Vec<(usize, usize)>, frames: usize, settings: &LabelQcSettings) -> PairSampler {
+        let stride = frames.div_ceil(settings.sample_frames.max(1)).max(1);
+        let samples = vec![Vec::new(); pairs.len()];
+        PairSampler { pairs, samples, stride }
+    }
+
+    /// Frame `f` of the trial, positions in model-marker order (NaN where not observed).
+    pub(crate) fn frame(&mut self, f: usize, x: &[[f64; 3]]) {
+        if !f.is_multiple_of(self.stride) {
+            return;
+        }
+        for (k, &(a, b)) in self.pairs.iter().enumerate() {
+            let d = distance(&x[a], &x[b]);
+            if d.is_finite() {
+                self.samples[k].push(d);
+            }
+        }
+    }
+
+    /// The rigid pairs: sampled in at least 10 frames, robust spread at most `rigid_sd_mm`.
+    pub(crate) fn rigid(mut self, settings: &LabelQcSettings) -> Vec<Pair> {
+        let mut out = Vec::new();
+        for (k, &(a, b)) in self.pairs.iter().enumerate() {
+            let s = &mut self.samples[k];
+            if s.len() < 10 {
+                continue;
+            }
+            let med = median(s);
+            let mut dev: Vec<f64> = s.iter().map(|d| (d - med).abs()).collect();
+            let sd = 1.4826 * median(&mut dev);
+            if sd <= settings.rigid_sd_mm * 1e-3 {
+                out.push(Pair { a, b, reference: med, tolerance: settings.noise_sds * sd.max(1e-3) });
+            }
+        }
+        out
+    }
+}
+
+/// Distance between two points (NaN when either is missing).
+pub(crate) fn distance(p: &[f64; 3], q: &[f64; 3]) -> f64 {
+    ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
+}
+
+/// Median (sorts `v`; `v` not empty).
+pub(crate) fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}

@@ -1,0 +1,280 @@
+//! The per-frame screen: each marker's misfit to its rigid partners, and — only in frames where
+//! a marker is flagged — the exchanges of two labels that explain the misfit, then the markers
+//! that must be masked for what is left. Allocation-free per frame once built.
+
+use super::rigid::{distance, median, tree_distance, Pair};
+use crate::model::Model;
+
+/// What one frame's screen found.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Findings {
+    /// `(a, b, before, after)`: labels `a < b` exchanged; the mean score (m) of the two before and
+    /// after the exchange.
+    pub swaps: Vec<(usize, usize, f64, f64)>,
+    /// `(m, score)`: marker masked, its score (m) before.
+    pub masks: Vec<(usize, f64)>,
+}
+
+/// The screen of one trial.
+pub(crate) struct Screen {
+    pairs: Vec<Pair>,
+    /// Per marker: the indices of its rigid pairs.
+    partners: Vec<Vec<usize>>,
+    /// Per marker: the markers whose label it may have exchanged with (its left/right mirror,
+    /// markers on its body or bodies up to two joints away).
+    candidates: Vec<Vec<usize>>,
+    threshold: f64,
+    work: Vec<[f64; 3]>,
+    flagged: Vec<usize>,
+    considered: Vec<usize>,
+    /// Every marker's score in the frame screened last, and in the frame before.
+    pub(crate) scores: Vec<f64>,
+    pub(crate) previous: Vec<f64>,
+    /// The previous frame as screened (exchanges applied, masks as gaps).
+    last: Vec<[f64; 3]>,
+    scratch: Vec<f64>,
+    pub(crate) findings: Findings,
+}
+
+impl Screen {
+    pub(crate) fn new(model: &Model, used: &[bool], pairs: Vec<Pair>, threshold_m: f64) -> Screen {
+        let nm = used.len();
+        let mut partners = vec![Vec::new(); nm];
+        for (k, p) in pairs.iter().enumerate() {
+            partners[p.a].push(k);
+            partners[p.b].push(k);
+        }
+        let candidates = (0..nm)
+            .map(|a| {
+                if !used[a] || partners[a].is_empty() {
+                    return Vec::new();
+                }
+                let mirror = mirror_of(model, a);
+                (0..nm)
+                    .filter(|&b| b != a && used[b])
+                    .filter(|&b| {
+                        Some(b) == mirror || tree_distance(model, model.markers[a].body, model.markers[b].body) <= 1
+                    })
+                    .collect()
+            })
+            .collect();
+        Screen {
+            pairs,
+            partners,
+            candidates,
+            threshold: threshold_m,
+            work: vec![[f64::NAN; 3]; nm],
+            flagged: Vec::with_capacity(nm),
+            considered: Vec::with_capacity(nm),
+            scores: vec![0.0; nm],
+            previous: vec![0.0; nm],
+            last: vec![[f64::NAN; 3]; nm],
+            scratch: Vec::with_capacity(nm),
+            findings: Findings::default(),
+        }
+    }
+
+    /// Rigid pairs in use.
+    pub(crate) fn pair_count(&self) -> usize {
+        self.pairs.len()
+    }
+
+    /// How far pair `k`'s distance in `x` is from its reference beyond its tolerance (NaN when
+    /// a marker is missing).
+    fn excess(&self, k: usize, x: &[[f64; 3]]) -> f64 {
+        let p = &self.pairs[k];
+        let d = distance(&x[p.a], &x[p.b]);
+        ((d - p.reference).abs() - p.tolerance).max(0.0)
+    }
+
+    /// Marker `m`'s score in `x`: the median excess over its observed rigid partners (0 with
+    /// none, or when `m` is missing).
+    pub(crate) fn score(&mut self, m: usize, x: &[[f64; 3]]) -> f64 {
+        if !x[m][0].is_finite() {
+            return 0.0;
+        }
+        let mut s = std::mem::take(&mut self.scratch);
+        s.clear();
+        for &k in &self.partners[m] {
+            let e = self.excess(k, x);
+            if !e.is_nan() {
+                s.push(e);
+            }
+        }
+        let out = if s.is_empty() { 0.0 } else { median(&mut s) };
+        self.scratch = s;
+        out
+    }
+
+    /// Sum of marker `m`'s pair excesses in `x`.
+    fn load(&self, m: usize, x: &[[f64; 3]]) -> f64 {
+        self.partners[m].iter().map(|&k| self.excess(k, x)).filter(|e| !e.is_nan()).sum()
+    }
+
+    /// Markers whose score in `x` is above the threshold, into `self.flagged`; with `record`,
+    /// every marker's score into `self.scores`.
+    fn flag(&mut self, x: &[[f64; 3]], record: bool) {
+        let mut flagged = std::mem::take(&mut self.flagged);
+        flagged.clear();
+        for m in 0..x.len() {
+            let s = if self.partners[m].is_empty() { 0.0 } else { self.score(m, x) };
+            if record {
+                self.scores[m] = s;
+            }
+            if s > self.threshold {
+                flagged.push(m);
+            }
+        }
+        self.flagged = flagged;
+    }
+
+    /// The markers of the pairs whose excess in `x` is above the threshold, into
+    /// `self.considered` (sorted).
+    fn touched(&mut self, x: &[[f64; 3]]) {
+        let mut t = std::mem::take(&mut self.considered);
+        t.clear();
+        for k in 0..self.pairs.len() {
+            if self.excess(k, x) > self.threshold {
+                t.push(self.pairs[k].a);
+                t.push(self.pairs[k].b);
+            }
+        }
+        t.sort_unstable();
+        t.dedup();
+        self.considered = t;
+    }
+
+    /// Screens frame `x` (model-marker order, NaN where missing): fills [`Self::findings`], and
+    /// every marker's score in [`Self::scores`] (the previous frame's in [`Self::previous`]).
+    pub(crate) fn frame(&mut self, x: &[[f64; 3]]) {
+        self.findings.swaps.clear();
+        self.findings.masks.clear();
+        std::mem::swap(&mut self.scores, &mut self.previous);
+        self.flag(x, true);
+        self.touched(x);
+        if self.considered.is_empty() {
+            self.last.copy_from_slice(x);
+            return;
+        }
+        let mut work = std::mem::take(&mut self.work);
+        work.copy_from_slice(x);
+        // Exchanges, best first, of a marker of a pair that does not fit with a candidate (its
+        // left/right mirror, a marker on its body or the next): the exchange that removes the
+        // most misfit from the pairs it touches (more than twice the threshold, three quarters
+        // of it at least) and leaves both within the threshold.
+        for _ in 0..4 {
+            let mut best: Option<(usize, usize, f64, f64, f64)> = None;
+            let considered = std::mem::take(&mut self.considered);
+            let candidates = std::mem::take(&mut self.candidates);
+            for &a in &considered {
+                if !work[a][0].is_finite() {
+                    continue;
+                }
+                for &b in &candidates[a] {
+                    if !work[b][0].is_finite() || (b < a && considered.binary_search(&b).is_ok()) {
+                        continue;
+                    }
+                    let before = self.score(a, &work) + self.score(b, &work);
+                    let load = self.load(a, &work) + self.load(b, &work);
+                    work.swap(a, b);
+                    let (sa, sb) = (self.score(a, &work), self.score(b, &work));
+                    let left = self.load(a, &work) + self.load(b, &work);
+                    // How far the exchanged labels are from where the previous frame had them:
+                    // of two exchanges that fit alike (a mirror-symmetric marker set), the one
+                    // that keeps the labels' paths continuous.
+                    let step = |m: usize| {
+                        let d = distance(&work[m], &self.last[m]);
+                        if d.is_finite() {
+                            d
+                        } else {
+                            0.0
+                        }
+                    };
+                    let jumps = step(a) + step(b);
+                    work.swap(a, b);
+                    let gain = load - left;
+                    let rank = gain - jumps;
+                    if sa <= self.threshold
+                        && sb <= self.threshold
+                        && gain > 2.0 * self.threshold
+                        && left <= 0.25 * load
+                        && best.is_none_or(|bst| rank > bst.2)
+                    {
+                        best = Some((a.min(b), a.max(b), rank, before / 2.0, (sa + sb) / 2.0));
+                    }
+                }
+            }
+            self.considered = considered;
+            self.candidates = candidates;
+            let Some((a, b, _, before, after)) = best else { break };
+            work.swap(a, b);
+            self.findings.swaps.push((a, b, before, after));
+            self.touched(&work);
+            if self.considered.is_empty() {
+                break;
+            }
+        }
+        // What no exchange explains: mask the marker that carries the most misfit, while one
+        // scores above the threshold.
+        for _ in 0..6 {
+            self.flag(&work, false);
+            if self.flagged.is_empty() {
+                break;
+            }
+            let mut pick = (self.flagged[0], f64::NEG_INFINITY);
+            for &m in &self.flagged {
+                let l = self.load(m, &work);
+                if l > pick.1 {
+                    pick = (m, l);
+                }
+            }
+            let score = self.score(pick.0, &work);
+            self.findings.masks.push((pick.0, score));
+            work[pick.0] = [f64::NAN; 3];
+        }
+        self.last.copy_from_slice(&work);
+        self.work = work;
+    }
+
+    /// Whether exchanging `a` and `b` in frame `x` leaves both within the threshold (true when
+    /// either is missing).
+    pub(crate) fn exchange_fits(&mut self, a: usize, b: usize, x: &[[f64; 3]]) -> bool {
+        if !x[a][0].is_finite() || !x[b][0].is_finite() {
+            return true;
+        }
+        let mut work = std::mem::take(&mut self.work);
+        work.copy_from_slice(x);
+        work.swap(a, b);
+        let ok = self.score(a, &work) <= self.threshold && self.score(b, &work) <= self.threshold;
+        self.work = work;
+        ok
+    }
+}
+
+/// The model marker whose name is `a`'s with left and right exchanged (`LKNE` ↔ `RKNE`,
+/// `l.ASIS` ↔ `r.ASIS`, `knee_l` ↔ `knee_r`), if the model has it.
+pub(crate) fn mirror_of(model: &Model, a: usize) -> Option<usize> {
+    let name = &model.markers[a].name;
+    let flip = |c: char| match c {
+        'L' => Some('R'),
+        'R' => Some('L'),
+        'l' => Some('r'),
+        'r' => Some('l'),
+        _ => None,
+    };
+    let mut names = Vec::new();
+    let mut chars: Vec<char> = name.chars().collect();
+    if let Some(f) = chars.first().copied().and_then(flip) {
+        chars[0] = f;
+        names.push(chars.iter().collect::<String>());
+        chars[0] = name.chars().next().unwrap_or(' ');
+    }
+    if let Some(f) = chars.last().copied().and_then(flip) {
+        let n = chars.len();
+        if n > 2 && matches!(chars[n - 2], '_' | '.' | '-') {
+            chars[n - 1] = f;
+            names.push(chars.iter().collect::<String>());
+        }
+    }
+    names.iter().find_map(|n| model.markers.iter().position(|m| &m.name == n)).filter(|&b| b != a)
+}
