@@ -20,7 +20,7 @@ use crate::kinematics::assembly::FrameProblem;
 use crate::model::anthropometry::{resolve, stature_ratio, Survey};
 use crate::model::proxy::ProxyKind;
 use crate::model::MarkerClass;
-use crate::solve::calibrate::{finish, initial_state_weighted, JointProblem, Tracker};
+use crate::solve::calibrate::{finish, initial_state_weighted, JointProblem, StageCost, Tracker};
 use crate::solve::placement::place_markers;
 use crate::solve::prior::{
     measure, Anisotropy, Anthropometric, GlobalTerm, LandmarkAnchor, OffsetPrior, PriorReport, ScaleReport,
@@ -44,6 +44,25 @@ fn calibration_frames(counts: &[usize], k: usize, min: usize) -> Vec<usize> {
     }
     let n = good.len().min(k);
     (0..n).map(|i| good[(i * good.len()) / n + good.len() / (2 * n)]).collect()
+}
+
+/// The spans of frames `[a, b]` (inclusive) tracked to reach the `chosen` frames (increasing), each
+/// from a fresh multi-start: `run_in` frames before a chosen frame (not before `begin`), merged
+/// with the span before when they touch; one span from `begin` when `run_in` is 0.
+fn track_spans(chosen: &[usize], begin: usize, run_in: usize) -> Vec<(usize, usize)> {
+    let Some(&last) = chosen.last() else { return Vec::new() };
+    if run_in == 0 {
+        return vec![(begin, last)];
+    }
+    let mut spans: Vec<(usize, usize)> = Vec::new();
+    for &c in chosen {
+        let a = c.saturating_sub(run_in).max(begin);
+        match spans.last_mut() {
+            Some(s) if a <= s.1 + 1 => s.1 = c,
+            _ => spans.push((a, c)),
+        }
+    }
+    spans
 }
 
 /// The subject-level terms of `ctx`'s calibration, and how to report against them.
@@ -252,6 +271,9 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
         let (lo, hi) = ctx.proxy.proxies[k].range;
         p0[k] = pri.ratio.clamp(lo, hi);
     }
+    let mut stages: Vec<StageCost> = Vec::new();
+    let track_started = std::time::Instant::now();
+    let mut tracked = 0u32;
     let mut pooled: Vec<f64> = Vec::new();
     let mut starts: Vec<Vec<f64>> = Vec::new();
     let mut kinds: Vec<Kind> = Vec::new();
@@ -287,29 +309,34 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
         units_check(ctx, name, &sample, stride, all_w(kind), &p0)?;
         let chosen = calibration_frames(&counts, per_trial, settings.min_markers);
         let Some(&last) = chosen.last() else { continue };
-        // Track from the first frame to the last chosen one so that every chosen frame starts
-        // from a pose continuous with the motion (a cold start far into a motion can land in a
-        // wrong local minimum).
+        // Track into every chosen frame so that it starts from a pose continuous with the motion
+        // (a cold start far into a motion can land in a wrong local minimum): from a multi-start
+        // `calibration_run_in` frames before it, or through from the chosen frame before when
+        // that is as close (from the trial's first usable frame with a run-in of 0).
         let begin = (0..=last).find(|&f| counts[f] >= settings.min_markers).unwrap_or(0);
         let (tracking_ref, tracking_weights) = tracking_of(kind);
         let template = FrameProblem { observed: &[], marker_weights: w1, tracking_ref, tracking_weights };
         let mut tracker = Tracker::new(&mut solver, &p0);
         let mut next = chosen.iter().copied().peekable();
-        let mut a = begin;
-        while a <= last {
-            let b = a.saturating_add(t.window_frames().max(1)).min(last + 1);
-            let w = t.window(a..b).map_err(read)?;
-            let o = observations(&w, &map);
-            for (i, row) in o.chunks_exact(stride).enumerate() {
-                let p = tracker.step(&mut solver, row, &template);
-                if next.peek() == Some(&(a + i)) {
-                    next.next();
-                    pooled.extend_from_slice(row);
-                    starts.push(p.to_vec());
-                    kinds.push(kind);
+        for (a0, b0) in track_spans(&chosen, begin, settings.calibration_run_in) {
+            tracker.restart();
+            let mut a = a0;
+            while a <= b0 {
+                let b = a.saturating_add(t.window_frames().max(1)).min(b0 + 1);
+                let w = t.window(a..b).map_err(read)?;
+                let o = observations(&w, &map);
+                for (i, row) in o.chunks_exact(stride).enumerate() {
+                    let p = tracker.step(&mut solver, row, &template);
+                    tracked += 1;
+                    if next.peek() == Some(&(a + i)) {
+                        next.next();
+                        pooled.extend_from_slice(row);
+                        starts.push(p.to_vec());
+                        kinds.push(kind);
+                    }
                 }
+                a = b;
             }
-            a = b;
         }
         tracker.end(&mut solver);
     }
@@ -318,6 +345,7 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
         return Err(TrialError::NothingToCalibrate { trial, min: settings.min_markers });
     }
     let slices: Vec<&[f64]> = pooled.chunks(stride).collect();
+    stages.push(StageCost::new("track", slices.len(), tracked, 0, track_started));
     let pri = priors(ctx, &scale, settings.prior_noise_sd_m, slices.len())?;
     let w_first: Vec<&[f64]> = kinds.iter().map(|&k| first_w(k).as_slice()).collect();
     let w_all: Vec<&[f64]> = kinds.iter().map(|&k| all_w(k).as_slice()).collect();
@@ -330,7 +358,10 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     let generic: Vec<Vector3<f64>> = ctx.model.markers.iter().map(|m| m.offset).collect();
     let none = vec![false; nm];
     // Stage 1: scales and poses on the first-stage markers.
+    let t = std::time::Instant::now();
     let mut state = initial_state_weighted(&mut solver, &slices, &w_first, &template, &p0, &starts);
+    stages.push(StageCost::new("initial", slices.len(), slices.len() as u32, 0, t));
+    let t = std::time::Instant::now();
     let terms = pri.all();
     let refs: Vec<&[f64]> = kinds.iter().map(|&k| tracking_of(k).0).collect();
     let tracking_w: Vec<&[f64]> = kinds.iter().map(|&k| tracking_of(k).1).collect();
@@ -348,6 +379,7 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
         terms: &terms,
     };
     let mut out = stage1.solve(&mut state);
+    stages.push(StageCost::new("scales", slices.len(), out.iterations, out.rejected, t));
     let mut iterations = out.iterations;
     // Empirical Bayes: the scale priors are weighed against the marker error the data show
     // (stage 1's RMSE, within [0.5, 30] mm: half a millimetre is about what optical motion
@@ -358,7 +390,9 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     let terms = pri.all();
     let stage1 = JointProblem { terms: &terms, ..stage1 };
     if !registering {
+        let t = std::time::Instant::now();
         out = stage1.solve(&mut state);
+        stages.push(StageCost::new("scales_reweighed", slices.len(), out.iterations, out.rejected, t));
         iterations += out.iterations;
     }
     let mut offsets = None;
@@ -374,6 +408,7 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     let seen: Vec<bool> = (0..nm)
         .map(|m| slices.iter().zip(&w_all).any(|(f, w)| w[m] > 0.0 && f[3 * m..3 * m + 3].iter().all(|v| !v.is_nan())))
         .collect();
+    let t = std::time::Instant::now();
     if registering {
         // Stage 2: tracking markers start where the stage-1 poses saw them.
         let tracking: Vec<bool> = classes.iter().map(|c| *c == MarkerClass::Tracking).collect();
@@ -392,6 +427,7 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
         let reg = seen.clone();
         let stage2 = JointProblem { weights: &w_all, registered: &reg, bound_m: b, terms: &all_terms, ..stage1 };
         out = stage2.solve(&mut state);
+        stages.push(StageCost::new("registration", slices.len(), out.iterations, out.rejected, t));
         iterations += out.iterations;
         registered = reg.iter().filter(|r| **r).count();
         offsets = Some(state.offsets.clone());
@@ -399,7 +435,9 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
         let movable: Vec<bool> = ctx.model.markers.iter().map(|m| !m.fixed).collect();
         let placed = place_markers(&ctx.model, &ctx.proxy, &place_frames, &place_poses, &movable);
         offsets = Some(placed.iter().zip(&ctx.model.markers).map(|(p, m)| p.unwrap_or(m.offset)).collect());
+        stages.push(StageCost::new("placement", place_frames.len(), 0, 0, t));
     }
+    let t = std::time::Instant::now();
     out.iterations = iterations;
     let mut cal = finish(state, out, &p0, &ctx.proxy, offsets, registered, started);
     cal.static_frames = kinds.iter().filter(|k| **k == Kind::Static).count();
@@ -417,7 +455,8 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
             ),
         });
     }
-    Ok(Calibration { seconds: started.elapsed().as_secs_f64(), prior: report, ..cal })
+    stages.push(StageCost::new("report", slices.len(), 0, 0, t));
+    Ok(Calibration { seconds: started.elapsed().as_secs_f64(), prior: report, stages, ..cal })
 }
 
 fn prior_report(ctx: &Context, pri: &Priors, scale: &[usize], cal: &Calibration) -> PriorReport {
@@ -604,4 +643,17 @@ fn units_check(
             "its markers spread {r:.3e} times as far as the model's: the data look like {hint}; give the right --units"
         ),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::track_spans;
+
+    #[test]
+    fn run_ins_reach_each_chosen_frame_and_merge_when_they_touch() {
+        assert_eq!(track_spans(&[], 0, 10), []);
+        assert_eq!(track_spans(&[50, 100, 105, 300], 3, 10), [(40, 50), (90, 105), (290, 300)]);
+        assert_eq!(track_spans(&[5, 16], 3, 10), [(3, 16)]);
+        assert_eq!(track_spans(&[5, 100], 3, 0), [(3, 100)]);
+    }
 }

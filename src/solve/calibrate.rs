@@ -14,6 +14,7 @@
 
 use super::init::multi_start;
 use super::prior::{GlobalTerm, Globals};
+use super::fixed;
 use super::qp::{BoxQp, ClarabelQp, LinearConstraints, QpProblem, QpSolver};
 use super::settings::SolverSettings;
 use super::trqp::FrameSolver;
@@ -65,6 +66,48 @@ pub struct Calibration {
     /// The root's joints (the hips) found from the motion against the calibrated model's.
     #[serde(default)]
     pub functional_centres: Vec<super::prior::FunctionalCentre>,
+    /// What each stage cost (tracking, each joint solve, the report), in order.
+    #[serde(default)]
+    pub stages: Vec<StageCost>,
+}
+
+/// The cost of one calibration stage.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct StageCost {
+    /// `track` (pose-only tracking to the chosen frames), `initial` (their poses at the starting
+    /// scales), `scales` (scales and poses on the first-stage markers), `scales_reweighed`
+    /// (again under the re-weighed priors, without registration), `registration` (scales,
+    /// poses and offsets), `placement` (OpenSim's MarkerPlacer), `report` (posture, functional
+    /// centres, priors).
+    pub stage: String,
+    /// Frames the stage works on.
+    pub frames: usize,
+    /// Frame solves (`track`, `initial`) or accepted Levenberg–Marquardt steps (joint solves).
+    pub iterations: u32,
+    /// Rejected Levenberg–Marquardt steps (joint solves).
+    #[serde(default)]
+    pub rejected: u32,
+    /// Wall time (s).
+    pub seconds: f64,
+}
+
+impl StageCost {
+    /// A stage that started at `started`.
+    pub fn new(stage: &str, frames: usize, iterations: u32, rejected: u32, started: std::time::Instant) -> StageCost {
+        StageCost { stage: stage.into(), frames, iterations, rejected, seconds: started.elapsed().as_secs_f64() }
+    }
+
+    /// One line: `stage 12.3 ms (frames, iterations[+rejected])` per stage.
+    pub fn summary(stages: &[StageCost]) -> String {
+        stages
+            .iter()
+            .map(|s| {
+                let rej = if s.rejected > 0 { format!("+{}", s.rejected) } else { String::new() };
+                format!("{} {:.1} ms ({} fr, {}{rej} it)", s.stage, s.seconds * 1e3, s.frames, s.iterations)
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
 }
 
 impl Calibration {
@@ -141,16 +184,21 @@ pub struct JointState {
 /// What one joint solve did.
 #[derive(Clone, Copy, Debug)]
 pub struct JointOutcome {
+    /// Accepted steps.
     pub iterations: u32,
+    /// Rejected steps (the damping grew).
+    pub rejected: u32,
     pub energy: f64,
     /// Mean over frames of the marker RMSE (m).
     pub rmse_m: f64,
 }
 
-/// Per-frame blocks of the Schur complement.
+/// Per-frame blocks of the Schur complement: `A = L Lᵀ`, `U = L⁻¹ B`, `w = L⁻¹ g_q`, so that
+/// `Bᵀ A⁻¹ B = UᵀU`, `Bᵀ A⁻¹ g_q = Uᵀw` and `Δq = −L⁻ᵀ (w + U Δz)`.
 struct FrameBlocks {
-    ainv_b: DMatrix<f64>,
-    ainv_g: DVector<f64>,
+    l: DMatrix<f64>,
+    u: DMatrix<f64>,
+    w: DVector<f64>,
 }
 
 impl JointProblem<'_> {
@@ -224,6 +272,7 @@ impl JointProblem<'_> {
         let (mut energy, mut rmse) = self.total(state, &scale, &cols);
         let mut lambda = 1e-4;
         let mut iterations = 0;
+        let mut rejected = 0;
         let zero_w = vec![0.0; nm];
         while iterations < s.calibration_max_iterations && !self.frames.is_empty() {
             iterations += 1;
@@ -276,14 +325,13 @@ impl JointProblem<'_> {
                         }
                     }
                 }
-                a += jq.tr_mul(&jq);
+                fixed::add_t_mul_sym(&mut a, 0, 1.0, &jq);
                 gq += jq.tr_mul(&r);
                 // Scale part.
-                let c_ss = js.tr_mul(&js);
                 let g_s = js.tr_mul(&r);
                 let mut b = DMatrix::zeros(nq, nz);
-                b.columns_mut(0, ns).copy_from(&jq.tr_mul(&js));
-                schur.view_mut((0, 0), (ns, ns)).add_assign(&c_ss);
+                fixed::add_t_mul(&mut b, (0, 0), 1.0, &jq, &js);
+                fixed::add_t_mul_sym(&mut schur, 0, 1.0, &js);
                 rhs.rows_mut(0, ns).sub_assign(&g_s);
                 // Offset parts: marker m's rows depend on its own offset through R_b diag(s_b).
                 for (i, &m) in rows.iter().enumerate() {
@@ -313,11 +361,14 @@ impl JointProblem<'_> {
                     blocks.push(None);
                     continue;
                 };
-                let ainv_b = chol.solve(&b);
-                let ainv_g = chol.solve(&gq);
-                schur -= b.tr_mul(&ainv_b);
-                rhs += b.tr_mul(&ainv_g);
-                blocks.push(Some(FrameBlocks { ainv_b, ainv_g }));
+                let l = chol.unpack();
+                let mut u = b;
+                l.solve_lower_triangular_unchecked_mut(&mut u);
+                let mut w = gq;
+                l.solve_lower_triangular_unchecked_mut(&mut w);
+                fixed::add_t_mul_sym(&mut schur, 0, -1.0, &u);
+                rhs += u.tr_mul(&w);
+                blocks.push(Some(FrameBlocks { l, u, w }));
             }
             for d in 0..nz {
                 schur[(d, d)] += lambda * schur[(d, d)].max(s.damping_floor);
@@ -372,12 +423,17 @@ impl JointProblem<'_> {
                     p[k] = (p[k] + ds[i]).clamp(lo[k], hi[k]);
                 }
                 let Some(fb) = block else { continue };
-                let dq = -(&fb.ainv_g + &fb.ainv_b * &dz);
+                let mut dq = &fb.w + fixed::mul_v(&fb.u, &dz);
+                fb.l.tr_solve_lower_triangular_unchecked_mut(&mut dq);
+                dq.neg_mut();
                 for (i, &k) in pose.iter().enumerate() {
                     p[k] = (p[k] + dq[i]).clamp(lo[k], hi[k]);
                 }
             }
             let (e1, r1) = self.total(&next, &scale, &cols);
+            if std::env::var_os("SMOCAP_CAL_TRACE").is_some() {
+                eprintln!("TRACE it {iterations} nz {nz} E {energy:.9e} -> {e1:.9e} rel {:.3e} lambda {lambda:.1e} dz {:.2e}", (energy - e1) / energy, dz.amax());
+            }
             if e1 < energy {
                 let rel = (energy - e1) / energy.max(f64::MIN_POSITIVE);
                 *state = next;
@@ -390,13 +446,14 @@ impl JointProblem<'_> {
                     break;
                 }
             } else {
+                rejected += 1;
                 lambda *= 4.0;
                 if lambda > 1e8 {
                     break;
                 }
             }
         }
-        JointOutcome { iterations, energy, rmse_m: rmse }
+        JointOutcome { iterations: iterations - rejected, rejected, energy, rmse_m: rmse }
     }
 }
 
@@ -507,6 +564,7 @@ pub fn finish(
         posture: Default::default(),
         registration_report: Default::default(),
         functional_centres: Vec::new(),
+        stages: Vec::new(),
     }
 }
 
@@ -581,6 +639,11 @@ impl Tracker {
         };
         self.warm = st.status != super::FrameStatus::TooFewMarkers;
         &self.p
+    }
+
+    /// The next frame is not continuous with the last one: it starts from several starts again.
+    pub fn restart(&mut self) {
+        self.warm = false;
     }
 
     /// Gives the solver back its free proxies.
