@@ -46,23 +46,15 @@ fn calibration_frames(counts: &[usize], k: usize, min: usize) -> Vec<usize> {
     (0..n).map(|i| good[(i * good.len()) / n + good.len() / (2 * n)]).collect()
 }
 
-/// The spans of frames `[a, b]` (inclusive) tracked to reach the `chosen` frames (increasing), each
-/// from a fresh multi-start: `run_in` frames before a chosen frame (not before `begin`), merged
-/// with the span before when they touch; one span from `begin` when `run_in` is 0.
-fn track_spans(chosen: &[usize], begin: usize, run_in: usize) -> Vec<(usize, usize)> {
-    let Some(&last) = chosen.last() else { return Vec::new() };
-    if run_in == 0 {
-        return vec![(begin, last)];
+/// Frames between tracked frames: `step_s` at `rate_hz`, at least 1 (every frame when the rate
+/// is unknown or `step_s` is 0).
+fn track_step(step_s: f64, rate_hz: f64) -> usize {
+    let k = (step_s * rate_hz).floor();
+    if k.is_finite() && k >= 1.0 {
+        (k as usize).min(1000)
+    } else {
+        1
     }
-    let mut spans: Vec<(usize, usize)> = Vec::new();
-    for &c in chosen {
-        let a = c.saturating_sub(run_in).max(begin);
-        match spans.last_mut() {
-            Some(s) if a <= s.1 + 1 => s.1 = c,
-            _ => spans.push((a, c)),
-        }
-    }
-    spans
 }
 
 /// The subject-level terms of `ctx`'s calibration, and how to report against them.
@@ -309,34 +301,36 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
         units_check(ctx, name, &sample, stride, all_w(kind), &p0)?;
         let chosen = calibration_frames(&counts, per_trial, settings.min_markers);
         let Some(&last) = chosen.last() else { continue };
-        // Track into every chosen frame so that it starts from a pose continuous with the motion
-        // (a cold start far into a motion can land in a wrong local minimum): from a multi-start
-        // `calibration_run_in` frames before it, or through from the chosen frame before when
-        // that is as close (from the trial's first usable frame with a run-in of 0).
+        // Track from the first usable frame to the last chosen one so that every chosen frame
+        // starts from a pose continuous with the motion (a cold start far into a motion can land
+        // in a wrong local minimum): every frame `calibration_track_step_s` apart (at least every
+        // frame; the chosen ones always), each warm-started from the one before.
         let begin = (0..=last).find(|&f| counts[f] >= settings.min_markers).unwrap_or(0);
+        let step = track_step(settings.calibration_track_step_s, header.rate_hz);
         let (tracking_ref, tracking_weights) = tracking_of(kind);
         let template = FrameProblem { observed: &[], marker_weights: w1, tracking_ref, tracking_weights };
         let mut tracker = Tracker::new(&mut solver, &p0);
         let mut next = chosen.iter().copied().peekable();
-        for (a0, b0) in track_spans(&chosen, begin, settings.calibration_run_in) {
-            tracker.restart();
-            let mut a = a0;
-            while a <= b0 {
-                let b = a.saturating_add(t.window_frames().max(1)).min(b0 + 1);
-                let w = t.window(a..b).map_err(read)?;
-                let o = observations(&w, &map);
-                for (i, row) in o.chunks_exact(stride).enumerate() {
-                    let p = tracker.step(&mut solver, row, &template);
-                    tracked += 1;
-                    if next.peek() == Some(&(a + i)) {
-                        next.next();
-                        pooled.extend_from_slice(row);
-                        starts.push(p.to_vec());
-                        kinds.push(kind);
-                    }
+        let mut a = begin;
+        while a <= last {
+            let b = a.saturating_add(t.window_frames().max(1)).min(last + 1);
+            let w = t.window(a..b).map_err(read)?;
+            let o = observations(&w, &map);
+            for (i, row) in o.chunks_exact(stride).enumerate() {
+                let is_chosen = next.peek() == Some(&(a + i));
+                if !is_chosen && (a + i - begin) % step != 0 {
+                    continue;
                 }
-                a = b;
+                let p = tracker.step(&mut solver, row, &template);
+                tracked += 1;
+                if is_chosen {
+                    next.next();
+                    pooled.extend_from_slice(row);
+                    starts.push(p.to_vec());
+                    kinds.push(kind);
+                }
             }
+            a = b;
         }
         tracker.end(&mut solver);
     }
@@ -647,13 +641,14 @@ fn units_check(
 
 #[cfg(test)]
 mod tests {
-    use super::track_spans;
+    use super::track_step;
 
     #[test]
-    fn run_ins_reach_each_chosen_frame_and_merge_when_they_touch() {
-        assert_eq!(track_spans(&[], 0, 10), []);
-        assert_eq!(track_spans(&[50, 100, 105, 300], 3, 10), [(40, 50), (90, 105), (290, 300)]);
-        assert_eq!(track_spans(&[5, 16], 3, 10), [(3, 16)]);
-        assert_eq!(track_spans(&[5, 100], 3, 0), [(3, 100)]);
+    fn tracking_steps_by_time_and_never_skips_at_low_rates() {
+        assert_eq!(track_step(0.03, 100.0), 3);
+        assert_eq!(track_step(0.03, 60.0), 1);
+        assert_eq!(track_step(0.03, 240.0), 7);
+        assert_eq!(track_step(0.0, 100.0), 1);
+        assert_eq!(track_step(0.03, f64::NAN), 1);
     }
 }

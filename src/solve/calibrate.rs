@@ -12,9 +12,9 @@
 //! symmetry); the poses follow by back-substitution, clipped to their ranges. A step is accepted
 //! when the total objective decreases. A weak prior pulls unobservable scales toward 1.
 
+use super::fixed;
 use super::init::multi_start;
 use super::prior::{GlobalTerm, Globals};
-use super::fixed;
 use super::qp::{BoxQp, ClarabelQp, LinearConstraints, QpProblem, QpSolver};
 use super::settings::SolverSettings;
 use super::trqp::FrameSolver;
@@ -199,6 +199,9 @@ struct FrameBlocks {
     l: DMatrix<f64>,
     u: DMatrix<f64>,
     w: DVector<f64>,
+    /// The pose gradient and the damping added to `A`'s diagonal (for the predicted decrease).
+    g: DVector<f64>,
+    damping: DVector<f64>,
 }
 
 impl JointProblem<'_> {
@@ -271,6 +274,9 @@ impl JointProblem<'_> {
         let (lo, hi): (Vec<f64>, Vec<f64>) = self.proxy.proxies.iter().map(|p| p.range).unzip();
         let (mut energy, mut rmse) = self.total(state, &scale, &cols);
         let mut lambda = 1e-4;
+        // Nielsen's damping update: λ follows the gain ratio of each kept step; `nu` grows on
+        // consecutive rejections.
+        let mut nu = 2.0;
         let mut iterations = 0;
         let mut rejected = 0;
         let zero_w = vec![0.0; nm];
@@ -290,6 +296,7 @@ impl JointProblem<'_> {
                 rhs -= gz;
             }
             let mut blocks: Vec<Option<FrameBlocks>> = Vec::with_capacity(self.frames.len());
+            let mut reduced = DVector::<f64>::zeros(nz);
             for (k, ((obs, p), mw)) in self.frames.iter().zip(&state.poses).zip(self.weights).enumerate() {
                 // Coordinate targets alone (marker weights 0) give the tracking part of H and g.
                 let tp = FrameProblem {
@@ -354,8 +361,9 @@ impl JointProblem<'_> {
                     schur.view_mut((c, c), (3, 3)).add_assign(&(jo.transpose() * jo));
                     rhs.rows_mut(c, 3).sub_assign(&(jo.transpose() * r_m));
                 }
+                let damping = DVector::from_fn(nq, |d, _| lambda * a[(d, d)].max(s.damping_floor));
                 for d in 0..nq {
-                    a[(d, d)] += lambda * a[(d, d)].max(s.damping_floor);
+                    a[(d, d)] += damping[d];
                 }
                 let Some(chol) = a.cholesky() else {
                     blocks.push(None);
@@ -364,14 +372,18 @@ impl JointProblem<'_> {
                 let l = chol.unpack();
                 let mut u = b;
                 l.solve_lower_triangular_unchecked_mut(&mut u);
-                let mut w = gq;
+                let mut w = gq.clone();
                 l.solve_lower_triangular_unchecked_mut(&mut w);
                 fixed::add_t_mul_sym(&mut schur, 0, -1.0, &u);
-                rhs += u.tr_mul(&w);
-                blocks.push(Some(FrameBlocks { l, u, w }));
+                reduced += u.tr_mul(&w);
+                blocks.push(Some(FrameBlocks { l, u, w, g: gq, damping }));
             }
+            // `rhs` so far is −g_z; the poses' elimination adds Σ Uᵀw.
+            let neg_gz = rhs.clone();
+            rhs += reduced;
+            let damping_z = DVector::from_fn(nz, |d, _| lambda * schur[(d, d)].max(s.damping_floor));
             for d in 0..nz {
-                schur[(d, d)] += lambda * schur[(d, d)].max(s.damping_floor);
+                schur[(d, d)] += damping_z[d];
             }
             // Bounds: scale ranges, offsets within the bound around their reference.
             let p_now = &state.poses[0];
@@ -417,6 +429,8 @@ impl JointProblem<'_> {
                     }
                 }
             }
+            // Decrease the damped model predicts, ½ (δᵀ λD δ − gᵀδ) over poses and z.
+            let mut predicted = 0.5 * (dz.dot(&damping_z.component_mul(&dz)) + neg_gz.dot(&dz));
             let ds = dz.rows(0, ns).into_owned();
             for (p, block) in next.poses.iter_mut().zip(&blocks) {
                 for (i, &k) in scale.iter().enumerate() {
@@ -426,20 +440,21 @@ impl JointProblem<'_> {
                 let mut dq = &fb.w + fixed::mul_v(&fb.u, &dz);
                 fb.l.tr_solve_lower_triangular_unchecked_mut(&mut dq);
                 dq.neg_mut();
+                predicted += 0.5 * (dq.dot(&fb.damping.component_mul(&dq)) - fb.g.dot(&dq));
                 for (i, &k) in pose.iter().enumerate() {
                     p[k] = (p[k] + dq[i]).clamp(lo[k], hi[k]);
                 }
             }
             let (e1, r1) = self.total(&next, &scale, &cols);
-            if std::env::var_os("SMOCAP_CAL_TRACE").is_some() {
-                eprintln!("TRACE it {iterations} nz {nz} E {energy:.9e} -> {e1:.9e} rel {:.3e} lambda {lambda:.1e} dz {:.2e}", (energy - e1) / energy, dz.amax());
-            }
             if e1 < energy {
                 let rel = (energy - e1) / energy.max(f64::MIN_POSITIVE);
+                let energy_before = energy;
                 *state = next;
                 energy = e1;
                 rmse = r1;
-                lambda = (lambda / 3.0).max(1e-9);
+                let rho = if predicted > 0.0 { (energy_before - e1) / predicted } else { 1.0 };
+                lambda = (lambda * (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0)).max(1e-9);
+                nu = 2.0;
                 // Converged: the objective stopped falling, or the subject stopped moving (scale
                 // factors and offsets changed by less than 1e-5, i.e. 10 µm on a metre).
                 if rel < s.calibration_rel_tol || dz.amax() < 1e-5 {
@@ -447,7 +462,8 @@ impl JointProblem<'_> {
                 }
             } else {
                 rejected += 1;
-                lambda *= 4.0;
+                lambda *= nu;
+                nu *= 2.0;
                 if lambda > 1e8 {
                     break;
                 }
@@ -639,11 +655,6 @@ impl Tracker {
         };
         self.warm = st.status != super::FrameStatus::TooFewMarkers;
         &self.p
-    }
-
-    /// The next frame is not continuous with the last one: it starts from several starts again.
-    pub fn restart(&mut self) {
-        self.warm = false;
     }
 
     /// Gives the solver back its free proxies.

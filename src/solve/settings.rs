@@ -112,11 +112,12 @@ pub struct SolverSettings {
     /// all of the subject's trials (`calibration_frames` applies to a static trial). Default 96
     /// (48 gives 0.7 mm more RMSE on the OpenCap subject; calibration time grows linearly).
     pub calibration_frames_motion: usize,
-    /// Frames tracked (pose only, from a multi-start) into each calibration frame, so that it
-    /// starts in the motion's basin; calibration frames closer than this are tracked through.
-    /// 0 tracks every trial from its first usable frame to its last calibration frame. Default 20
-    /// (see docs/CALIBRATION.md, "Cost").
-    pub calibration_run_in: usize,
+    /// Time between the frames tracked (pose only, each warm-started from the one before) from a
+    /// trial's first usable frame to its calibration frames, so that each calibration frame
+    /// starts in the motion's basin (s). Every frame at or below `1 / rate`; calibration frames are
+    /// always tracked. Default 0.03 (every third frame at 100 Hz, every frame at 60 Hz; see
+    /// docs/CALIBRATION.md, "Cost").
+    pub calibration_track_step_s: f64,
     /// Marker registration: calibration estimates every marker's body-frame offset together with
     /// the scales and the calibration poses, offsets held near the model's (anatomical markers
     /// strongly, tracking markers weakly). Default true; off with `--no-register`, and an
@@ -206,7 +207,7 @@ impl Default for SolverSettings {
             presolve: Presolve::default(),
             presolve_sweeps: 2,
             calibration_frames_motion: 96,
-            calibration_run_in: 20,
+            calibration_track_step_s: 0.03,
             registration: true,
             registration_anatomical_sd_m: 0.004,
             registration_tracking_sd_m: 0.1,
