@@ -124,7 +124,8 @@ pub struct ConvertSummary {
     /// Each calibrated subject's calibration cost, in dataset and subject order.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub calibrations: Vec<SubjectCalibration>,
-    /// Wall time of the whole run (s), and the workers it had.
+    /// Wall time of the conversion (s: from the trials found, synthetic datasets generated, to
+    /// the last trial written), and the workers it had.
     #[serde(default)]
     pub wall_seconds: f64,
     #[serde(default)]
@@ -314,7 +315,6 @@ pub fn convert(
     opt: &ConvertOptions,
     log: &(dyn Fn(&str) + Sync),
 ) -> Result<ConvertSummary, ConvertError> {
-    let started = std::time::Instant::now();
     let _lock = super::lock::lock_out(&opt.out, opt.shard)?;
     let mut notes = Vec::new();
     let mut groups: Vec<SubjectGroup> = Vec::new();
@@ -355,6 +355,8 @@ pub fn convert(
         }
         notes.push(note);
     }
+    // The run's clock starts once synthetic datasets are generated and every dataset is found.
+    let started = std::time::Instant::now();
     // Found over the whole archive (before sharding), so every shard agrees.
     let conflicts = output_conflicts(datasets, &groups, &opt.out);
     if let Some(s) = opt.shard {

@@ -123,7 +123,7 @@ mod tests {
         assert_eq!(mul_t(&a, &b.transpose()), &a * &b);
         assert_eq!(t_mul(&a.transpose(), &b), &a * &b);
         assert_eq!(mul_v(&a, &v), &a * &v);
-        let mut out = DMatrix::zeros(10, 10);
+        let mut out = DMatrix::zeros(11, 11);
         add_t_mul(&mut out, (1, 2), 2.0, &a, &a);
         assert_eq!(out.view((1, 2), (9, 9)), a.transpose() * &a * 2.0);
         let mut sym = DMatrix::zeros(10, 10);
