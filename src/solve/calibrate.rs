@@ -280,7 +280,11 @@ impl JointProblem<'_> {
         let mut iterations = 0;
         let mut rejected = 0;
         let zero_w = vec![0.0; nm];
-        while iterations < s.calibration_max_iterations && !self.frames.is_empty() {
+        // The cap counts kept steps with the gain-ratio rule (rejected ones are rare there; at
+        // most as many again), every step with the fixed one.
+        let gain_ratio = s.calibration_gain_ratio;
+        let counted = |it: u32, rej: u32| if gain_ratio { (it - rej).max(it / 2) } else { it };
+        while counted(iterations, rejected) < s.calibration_max_iterations && !self.frames.is_empty() {
             iterations += 1;
             let model = self.model_with(&state.offsets);
             let eval = Evaluator::new(&model, self.proxy);
@@ -452,9 +456,13 @@ impl JointProblem<'_> {
                 *state = next;
                 energy = e1;
                 rmse = r1;
-                let rho = if predicted > 0.0 { (energy_before - e1) / predicted } else { 1.0 };
-                lambda = (lambda * (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0)).max(1e-9);
-                nu = 2.0;
+                if gain_ratio {
+                    let rho = if predicted > 0.0 { (energy_before - e1) / predicted } else { 1.0 };
+                    lambda = (lambda * (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0)).max(1e-9);
+                    nu = 2.0;
+                } else {
+                    lambda = (lambda / 3.0).max(1e-9);
+                }
                 // Converged: the objective stopped falling, or the subject stopped moving (scale
                 // factors and offsets changed by less than 1e-5, i.e. 10 µm on a metre).
                 if rel < s.calibration_rel_tol || dz.amax() < 1e-5 {
@@ -462,8 +470,12 @@ impl JointProblem<'_> {
                 }
             } else {
                 rejected += 1;
-                lambda *= nu;
-                nu *= 2.0;
+                if gain_ratio {
+                    lambda *= nu;
+                    nu *= 2.0;
+                } else {
+                    lambda *= 4.0;
+                }
                 if lambda > 1e8 {
                     break;
                 }
