@@ -122,8 +122,8 @@ pub struct SolverSettings {
     /// Time between the frames tracked (pose only, each warm-started from the one before) from a
     /// trial's first usable frame to its calibration frames, so that each calibration frame
     /// starts in the motion's basin (s). Every frame at or below `1 / rate`; calibration frames are
-    /// always tracked. Default 0.05 (every fifth frame at 100 Hz, every third at 60 Hz: on the
-    /// OpenCap subject every frame, 0.03 s and 0.1 s give the same calibration; docs/CALIBRATION.md).
+    /// always tracked. Default 0.05 (every fifth frame at 100 Hz, every third at 60 Hz; 0 tracks
+    /// every frame, as before; what it changes: docs/CALIBRATION.md, "Cost").
     pub calibration_track_step_s: f64,
     /// Marker registration: calibration estimates every marker's body-frame offset together with
     /// the scales and the calibration poses, offsets held near the model's (anatomical markers
