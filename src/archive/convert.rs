@@ -125,11 +125,12 @@ pub struct ConvertSummary {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub calibrations: Vec<SubjectCalibration>,
     /// Wall time of the conversion (s: from the trials found, synthetic datasets generated, to
-    /// the last trial written), and the workers it had.
+    /// the last trial written).
     #[serde(default)]
     pub wall_seconds: f64,
+    /// Workers of the conversion (`--jobs`).
     #[serde(default)]
-    pub jobs: usize,
+    pub threads: usize,
 }
 
 /// What calibrating one subject cost.
@@ -251,12 +252,12 @@ impl ConvertSummary {
         let secs: f64 = solved.iter().map(|t| t.solve_s).sum();
         if frames > 0 && secs > 0.0 && self.wall_seconds > 0.0 {
             let end_to_end = frames as f64 / self.wall_seconds;
-            let capacity = frames as f64 / secs * self.jobs.max(1) as f64;
+            let capacity = frames as f64 / secs * self.threads.max(1) as f64;
             s += &format!(
                 "throughput: {frames} frames in {:.2} s wall: {end_to_end:.0} frames/s end to end; solver {:.0} frames/s per worker × {} = {capacity:.0}; ratio {:.2}\n",
                 self.wall_seconds,
                 frames as f64 / secs,
-                self.jobs.max(1),
+                self.threads.max(1),
                 end_to_end / capacity
             );
         }
@@ -405,7 +406,7 @@ pub fn convert(
         trials,
         calibrations,
         wall_seconds: started.elapsed().as_secs_f64(),
-        jobs: opt.jobs.max(1),
+        threads: opt.jobs.max(1),
     })
 }
 

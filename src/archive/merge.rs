@@ -82,7 +82,7 @@ pub fn merge(
             c
         },
         wall_seconds: 0.0,
-        jobs: 0,
+        threads: 0,
     };
     let merged_from = reports
         .iter()
