@@ -125,6 +125,26 @@ pub struct ConvertSummary {
     pub shard: Option<String>,
     pub datasets: Vec<DatasetNote>,
     pub trials: Vec<TrialOutcome>,
+    /// Each calibrated subject's calibration cost, in dataset and subject order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub calibrations: Vec<SubjectCalibration>,
+    /// Wall time of the conversion (s: from the trials found, synthetic datasets generated, to
+    /// the last trial written).
+    #[serde(default)]
+    pub wall_seconds: f64,
+    /// Workers of the conversion (`--jobs`).
+    #[serde(default)]
+    pub threads: usize,
+}
+
+/// What calibrating one subject cost.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct SubjectCalibration {
+    pub dataset: String,
+    pub subject: String,
+    /// Wall time (s).
+    pub seconds: f64,
+    pub stages: Vec<crate::solve::calibrate::StageCost>,
 }
 
 impl ConvertSummary {
@@ -193,6 +213,56 @@ impl ConvertSummary {
                 med(|t| t.ms_per_frame),
                 med(|t| t.iterations),
                 med(|t| t.rmse_mm),
+            );
+        }
+        s + &self.throughput()
+    }
+
+    /// Where the time went: calibration per subject (by stage), end-to-end frames/s against the
+    /// solver's capacity (frames/s per worker, summed over solved trials, times the workers).
+    pub fn throughput(&self) -> String {
+        let mut s = String::new();
+        if !self.calibrations.is_empty() {
+            let n = self.calibrations.len();
+            let total: f64 = self.calibrations.iter().map(|c| c.seconds).sum();
+            let mut names: Vec<&str> = Vec::new();
+            for c in &self.calibrations {
+                for st in &c.stages {
+                    if !names.contains(&st.stage.as_str()) {
+                        names.push(&st.stage);
+                    }
+                }
+            }
+            let per: Vec<String> = names
+                .iter()
+                .map(|name| {
+                    let stages = self.calibrations.iter().flat_map(|c| &c.stages);
+                    let t: f64 = stages.filter(|st| st.stage == *name).map(|st| st.seconds).sum();
+                    format!("{name} {:.1}", t / n as f64 * 1e3)
+                })
+                .collect();
+            let max = self.calibrations.iter().map(|c| c.seconds).fold(0.0, f64::max);
+            s += &format!(
+                "calibration: {n} subjects, {:.1} ms per subject (max {:.1}; {:.2} s in all), by stage (ms per subject): {}\n",
+                total / n as f64 * 1e3,
+                max * 1e3,
+                total,
+                per.join(", ")
+            );
+        }
+        let solved: Vec<&TrialOutcome> =
+            self.trials.iter().filter(|t| t.status == "ok" || t.status == "suspect").collect();
+        let frames: usize = solved.iter().map(|t| t.frames).sum();
+        let secs: f64 = solved.iter().map(|t| t.solve_s).sum();
+        if frames > 0 && secs > 0.0 && self.wall_seconds > 0.0 {
+            let end_to_end = frames as f64 / self.wall_seconds;
+            let capacity = frames as f64 / secs * self.threads.max(1) as f64;
+            s += &format!(
+                "throughput: {frames} frames in {:.2} s wall: {end_to_end:.0} frames/s end to end; solver {:.0} frames/s per worker × {} = {capacity:.0}; ratio {:.2}\n",
+                self.wall_seconds,
+                frames as f64 / secs,
+                self.threads.max(1),
+                end_to_end / capacity
             );
         }
         s
@@ -290,6 +360,8 @@ pub fn convert(
         }
         notes.push(note);
     }
+    // The run's clock starts once synthetic datasets are generated and every dataset is found.
+    let started = std::time::Instant::now();
     // Found over the whole archive (before sharding), so every shard agrees.
     let conflicts = output_conflicts(datasets, &groups, &opt.out);
     if let Some(s) = opt.shard {
@@ -315,20 +387,30 @@ pub fn convert(
         };
         log(&format!("[{k}/{total}] {}/{}: {what}", t.dataset, t.trial));
     };
-    let run = || -> Vec<TrialOutcome> {
-        groups.par_iter().flat_map_iter(|g| subject(&datasets[g.dataset], g, opt, &conflicts, &report, log)).collect()
+    let run = || -> Vec<(Vec<TrialOutcome>, Option<SubjectCalibration>)> {
+        groups.par_iter().map(|g| subject(&datasets[g.dataset], g, opt, &conflicts, &report, log)).collect()
     };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(opt.jobs.max(1)).build();
-    let mut trials = match &pool {
+    let per_subject = match &pool {
         Ok(p) => p.install(run),
         Err(_) => run(),
     };
+    let mut trials = Vec::new();
+    let mut calibrations = Vec::new();
+    for (t, c) in per_subject {
+        trials.extend(t);
+        calibrations.extend(c);
+    }
+    calibrations.sort_by(|a: &SubjectCalibration, b| (&a.dataset, &a.subject).cmp(&(&b.dataset, &b.subject)));
     trials.sort_by(|a, b| (&a.dataset, &a.trial).cmp(&(&b.dataset, &b.trial)));
     Ok(ConvertSummary {
         smocap_version: env!("CARGO_PKG_VERSION").into(),
         shard: opt.shard.map(|s| format!("{}/{}", s.index, s.count)),
         datasets: notes,
         trials,
+        calibrations,
+        wall_seconds: started.elapsed().as_secs_f64(),
+        threads: opt.jobs.max(1),
     })
 }
 
@@ -374,7 +456,7 @@ fn subject(
     conflicts: &BTreeMap<(usize, String), String>,
     report: &(dyn Fn(&TrialOutcome) + Sync),
     log: &(dyn Fn(&str) + Sync),
-) -> Vec<TrialOutcome> {
+) -> (Vec<TrialOutcome>, Option<SubjectCalibration>) {
     let mut outcomes = Vec::new();
     let mut todo = Vec::new();
     for t in &g.trials {
@@ -411,7 +493,7 @@ fn subject(
     }
     outcomes.iter().for_each(report);
     if todo.is_empty() {
-        return outcomes;
+        return (outcomes, None);
     }
     let fail_all = |why: String| -> Vec<TrialOutcome> {
         todo.iter().map(|(t, out, _)| failed(d, g, t, out, why.clone())).inspect(report).collect()
@@ -419,11 +501,11 @@ fn subject(
     let mut files = d.subject_files(g.static_trial.clone());
     match d.subject_info(&g.subject) {
         Ok(info) => files.subject = info,
-        Err(e) => return [outcomes, fail_all(format!("subject setup: {e}"))].concat(),
+        Err(e) => return ([outcomes, fail_all(format!("subject setup: {e}"))].concat(), None),
     }
     let mut sub = match prepare_subject(&files) {
         Ok(s) => s,
-        Err(e) => return [outcomes, fail_all(format!("subject setup: {e}"))].concat(),
+        Err(e) => return ([outcomes, fail_all(format!("subject setup: {e}"))].concat(), None),
     };
     // What C3D files say of their subject (as `solve`): the prior's height and mass where the
     // dataset gives none, and whether the subject's trials (done ones too) are one person.
@@ -436,7 +518,7 @@ fn subject(
     if !d.settings.is_empty() {
         match sub.ctx.settings.with_overrides(&d.settings) {
             Ok(s) => sub.ctx.settings = s,
-            Err(e) => return [outcomes, fail_all(format!("datasets.toml [settings]: {e}"))].concat(),
+            Err(e) => return ([outcomes, fail_all(format!("datasets.toml [settings]: {e}"))].concat(), None),
         }
         sub.ctx.settings.qp = crate::solve::backend_for(sub.ctx.settings.qp, &sub.ctx.proxy);
     }
@@ -447,7 +529,7 @@ fn subject(
     let statics: Vec<(String, Box<dyn TrialFrames>)> = match &sub.static_path {
         Some(p) => match open_for(d, &sub.ctx, p, &input, window) {
             Ok(t) => vec![(p.display().to_string(), t)],
-            Err(e) => return [outcomes, fail_all(format!("static trial: {e}"))].concat(),
+            Err(e) => return ([outcomes, fail_all(format!("static trial: {e}"))].concat(), None),
         },
         None => Vec::new(),
     };
@@ -491,14 +573,20 @@ fn subject(
             }
             Calibrated { base: sub.ctx, placed, calibration, settings_json, scaled_model, suspect }
         }
-        Err(why) => return [outcomes, fail_all(why)].concat(),
+        Err(why) => return ([outcomes, fail_all(why)].concat(), None),
+    };
+    let cost = SubjectCalibration {
+        dataset: d.name.clone(),
+        subject: g.subject.clone(),
+        seconds: cal.calibration.seconds,
+        stages: cal.calibration.stages.clone(),
     };
     // The backend holds the model (on the device for wgpu): chosen once the markers are final.
     let pinned = cal.ctx().pinned_to(&cal.calibration);
     let chosen =
         match crate::pipeline::device::choose(opt.backend, &pinned.evaluator(), crate::kinematics::gpu::DEFAULT_CAP) {
             Ok(c) => c,
-            Err(e) => return [outcomes, fail_all(format!("evaluation backend: {e}"))].concat(),
+            Err(e) => return ([outcomes, fail_all(format!("evaluation backend: {e}"))].concat(), Some(cost)),
         };
     drop(pinned);
     if let Some(note) = chosen.note() {
@@ -521,7 +609,7 @@ fn subject(
             batched(d, g, &todo, &input, &cal, opt, backend, lanes, report)
         }
     };
-    [outcomes, solved].concat()
+    ([outcomes, solved].concat(), Some(cost))
 }
 
 /// Consecutive runs `[i0, i1)` of trials of `frames` frames solved together: until their

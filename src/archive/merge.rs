@@ -76,6 +76,13 @@ pub fn merge(
         shard: None,
         datasets,
         trials: trials.into_values().collect(),
+        calibrations: {
+            let mut c: Vec<_> = reports.iter().flat_map(|(_, r)| r.calibrations.iter().cloned()).collect();
+            c.sort_by(|a, b| (&a.dataset, &a.subject).cmp(&(&b.dataset, &b.subject)));
+            c
+        },
+        wall_seconds: 0.0,
+        threads: 0,
     };
     let merged_from = reports
         .iter()

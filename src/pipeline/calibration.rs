@@ -20,7 +20,7 @@ use crate::kinematics::assembly::FrameProblem;
 use crate::model::anthropometry::{resolve, stature_ratio, Survey};
 use crate::model::proxy::ProxyKind;
 use crate::model::MarkerClass;
-use crate::solve::calibrate::{finish, initial_state_weighted, JointProblem, Tracker};
+use crate::solve::calibrate::{finish, initial_state_weighted, JointProblem, StageCost, Tracker};
 use crate::solve::placement::place_markers;
 use crate::solve::prior::{
     measure, Anisotropy, Anthropometric, GlobalTerm, LandmarkAnchor, OffsetPrior, PriorReport, ScaleReport,
@@ -44,6 +44,17 @@ fn calibration_frames(counts: &[usize], k: usize, min: usize) -> Vec<usize> {
     }
     let n = good.len().min(k);
     (0..n).map(|i| good[(i * good.len()) / n + good.len() / (2 * n)]).collect()
+}
+
+/// Frames between tracked frames: `step_s` at `rate_hz`, at least 1 (every frame when the rate
+/// is unknown or `step_s` is 0).
+fn track_step(step_s: f64, rate_hz: f64) -> usize {
+    let k = (step_s * rate_hz).floor();
+    if k.is_finite() && k >= 1.0 {
+        (k as usize).min(1000)
+    } else {
+        1
+    }
 }
 
 /// The subject-level terms of `ctx`'s calibration, and how to report against them.
@@ -252,6 +263,9 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
         let (lo, hi) = ctx.proxy.proxies[k].range;
         p0[k] = pri.ratio.clamp(lo, hi);
     }
+    let mut stages: Vec<StageCost> = Vec::new();
+    let track_started = std::time::Instant::now();
+    let mut tracked = 0u32;
     let mut pooled: Vec<f64> = Vec::new();
     let mut starts: Vec<Vec<f64>> = Vec::new();
     let mut kinds: Vec<Kind> = Vec::new();
@@ -287,10 +301,12 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
         units_check(ctx, name, &sample, stride, all_w(kind), &p0)?;
         let chosen = calibration_frames(&counts, per_trial, settings.min_markers);
         let Some(&last) = chosen.last() else { continue };
-        // Track from the first frame to the last chosen one so that every chosen frame starts
-        // from a pose continuous with the motion (a cold start far into a motion can land in a
-        // wrong local minimum).
+        // Track from the first usable frame to the last chosen one so that every chosen frame
+        // starts from a pose continuous with the motion (a cold start far into a motion can land
+        // in a wrong local minimum): every frame `calibration_track_step_s` apart (at least every
+        // frame; the chosen ones always), each warm-started from the one before.
         let begin = (0..=last).find(|&f| counts[f] >= settings.min_markers).unwrap_or(0);
+        let step = track_step(settings.calibration_track_step_s, header.rate_hz);
         let (tracking_ref, tracking_weights) = tracking_of(kind);
         let template = FrameProblem { observed: &[], marker_weights: w1, tracking_ref, tracking_weights };
         let mut tracker = Tracker::new(&mut solver, &p0);
@@ -301,8 +317,13 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
             let w = t.window(a..b).map_err(read)?;
             let o = observations(&w, &map);
             for (i, row) in o.chunks_exact(stride).enumerate() {
+                let is_chosen = next.peek() == Some(&(a + i));
+                if !is_chosen && (a + i - begin) % step != 0 {
+                    continue;
+                }
                 let p = tracker.step(&mut solver, row, &template);
-                if next.peek() == Some(&(a + i)) {
+                tracked += 1;
+                if is_chosen {
                     next.next();
                     pooled.extend_from_slice(row);
                     starts.push(p.to_vec());
@@ -318,6 +339,7 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
         return Err(TrialError::NothingToCalibrate { trial, min: settings.min_markers });
     }
     let slices: Vec<&[f64]> = pooled.chunks(stride).collect();
+    stages.push(StageCost::new("track", slices.len(), tracked, 0, track_started));
     let pri = priors(ctx, &scale, settings.prior_noise_sd_m, slices.len())?;
     let w_first: Vec<&[f64]> = kinds.iter().map(|&k| first_w(k).as_slice()).collect();
     let w_all: Vec<&[f64]> = kinds.iter().map(|&k| all_w(k).as_slice()).collect();
@@ -330,7 +352,10 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     let generic: Vec<Vector3<f64>> = ctx.model.markers.iter().map(|m| m.offset).collect();
     let none = vec![false; nm];
     // Stage 1: scales and poses on the first-stage markers.
+    let t = std::time::Instant::now();
     let mut state = initial_state_weighted(&mut solver, &slices, &w_first, &template, &p0, &starts);
+    stages.push(StageCost::new("initial", slices.len(), slices.len() as u32, 0, t));
+    let t = std::time::Instant::now();
     let terms = pri.all();
     let refs: Vec<&[f64]> = kinds.iter().map(|&k| tracking_of(k).0).collect();
     let tracking_w: Vec<&[f64]> = kinds.iter().map(|&k| tracking_of(k).1).collect();
@@ -348,6 +373,7 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
         terms: &terms,
     };
     let mut out = stage1.solve(&mut state);
+    stages.push(StageCost::new("scales", slices.len(), out.iterations, out.rejected, t));
     let mut iterations = out.iterations;
     // Empirical Bayes: the scale priors are weighed against the marker error the data show
     // (stage 1's RMSE, within [0.5, 30] mm: half a millimetre is about what optical motion
@@ -358,7 +384,9 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     let terms = pri.all();
     let stage1 = JointProblem { terms: &terms, ..stage1 };
     if !registering {
+        let t = std::time::Instant::now();
         out = stage1.solve(&mut state);
+        stages.push(StageCost::new("scales_reweighed", slices.len(), out.iterations, out.rejected, t));
         iterations += out.iterations;
     }
     let mut offsets = None;
@@ -374,6 +402,7 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     let seen: Vec<bool> = (0..nm)
         .map(|m| slices.iter().zip(&w_all).any(|(f, w)| w[m] > 0.0 && f[3 * m..3 * m + 3].iter().all(|v| !v.is_nan())))
         .collect();
+    let t = std::time::Instant::now();
     if registering {
         // Stage 2: tracking markers start where the stage-1 poses saw them.
         let tracking: Vec<bool> = classes.iter().map(|c| *c == MarkerClass::Tracking).collect();
@@ -392,6 +421,7 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
         let reg = seen.clone();
         let stage2 = JointProblem { weights: &w_all, registered: &reg, bound_m: b, terms: &all_terms, ..stage1 };
         out = stage2.solve(&mut state);
+        stages.push(StageCost::new("registration", slices.len(), out.iterations, out.rejected, t));
         iterations += out.iterations;
         registered = reg.iter().filter(|r| **r).count();
         offsets = Some(state.offsets.clone());
@@ -399,7 +429,9 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
         let movable: Vec<bool> = ctx.model.markers.iter().map(|m| !m.fixed).collect();
         let placed = place_markers(&ctx.model, &ctx.proxy, &place_frames, &place_poses, &movable);
         offsets = Some(placed.iter().zip(&ctx.model.markers).map(|(p, m)| p.unwrap_or(m.offset)).collect());
+        stages.push(StageCost::new("placement", place_frames.len(), 0, 0, t));
     }
+    let t = std::time::Instant::now();
     out.iterations = iterations;
     let mut cal = finish(state, out, &p0, &ctx.proxy, offsets, registered, started);
     cal.static_frames = kinds.iter().filter(|k| **k == Kind::Static).count();
@@ -417,7 +449,8 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
             ),
         });
     }
-    Ok(Calibration { seconds: started.elapsed().as_secs_f64(), prior: report, ..cal })
+    stages.push(StageCost::new("report", slices.len(), 0, 0, t));
+    Ok(Calibration { seconds: started.elapsed().as_secs_f64(), prior: report, stages, ..cal })
 }
 
 fn prior_report(ctx: &Context, pri: &Priors, scale: &[usize], cal: &Calibration) -> PriorReport {
@@ -604,4 +637,18 @@ fn units_check(
             "its markers spread {r:.3e} times as far as the model's: the data look like {hint}; give the right --units"
         ),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::track_step;
+
+    #[test]
+    fn tracking_steps_by_time_and_never_skips_at_low_rates() {
+        assert_eq!(track_step(0.03, 100.0), 3);
+        assert_eq!(track_step(0.03, 60.0), 1);
+        assert_eq!(track_step(0.03, 240.0), 7);
+        assert_eq!(track_step(0.0, 100.0), 1);
+        assert_eq!(track_step(0.03, f64::NAN), 1);
+    }
 }

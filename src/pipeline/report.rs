@@ -145,6 +145,9 @@ pub struct CalibrationReport {
     /// the user gave none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub subject_from_files: Option<String>,
+    /// What each stage cost (frames, accepted and rejected steps, wall time).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stages: Vec<crate::solve::calibrate::StageCost>,
 }
 
 impl CalibrationReport {
@@ -155,7 +158,11 @@ impl CalibrationReport {
         format!(
             "calibration: {} frames, {} iterations, {:.2} s, RMSE {:.2} mm, {} markers registered{stature}, largest |z| of a scale {worst:.2}: {}",
             self.frames, self.iterations, self.seconds, self.rmse_mm, self.registered_markers, self.status
-        )
+        ) + &if self.stages.is_empty() {
+            String::new()
+        } else {
+            format!("\n  calibration stages: {}", crate::solve::calibrate::StageCost::summary(&self.stages))
+        }
     }
 
     /// The report of `cal` for the subject `ctx` (its generic markers).
@@ -194,6 +201,7 @@ impl CalibrationReport {
             functional_centres: cal.functional_centres.clone(),
             static_posture: (cal.static_frames > 0).then(|| cal.posture.clone()),
             subject_from_files: None,
+            stages: cal.stages.clone(),
         }
     }
 }

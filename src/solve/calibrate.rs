@@ -12,6 +12,7 @@
 //! symmetry); the poses follow by back-substitution, clipped to their ranges. A step is accepted
 //! when the total objective decreases. A weak prior pulls unobservable scales toward 1.
 
+use super::fixed;
 use super::init::multi_start;
 use super::prior::{GlobalTerm, Globals};
 use super::qp::{BoxQp, ClarabelQp, LinearConstraints, QpProblem, QpSolver};
@@ -65,6 +66,48 @@ pub struct Calibration {
     /// The root's joints (the hips) found from the motion against the calibrated model's.
     #[serde(default)]
     pub functional_centres: Vec<super::prior::FunctionalCentre>,
+    /// What each stage cost (tracking, each joint solve, the report), in order.
+    #[serde(default)]
+    pub stages: Vec<StageCost>,
+}
+
+/// The cost of one calibration stage.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct StageCost {
+    /// `track` (pose-only tracking to the chosen frames), `initial` (their poses at the starting
+    /// scales), `scales` (scales and poses on the first-stage markers), `scales_reweighed`
+    /// (again under the re-weighed priors, without registration), `registration` (scales,
+    /// poses and offsets), `placement` (OpenSim's MarkerPlacer), `report` (posture, functional
+    /// centres, priors).
+    pub stage: String,
+    /// Frames the stage works on.
+    pub frames: usize,
+    /// Frame solves (`track`, `initial`) or accepted Levenberg–Marquardt steps (joint solves).
+    pub iterations: u32,
+    /// Rejected Levenberg–Marquardt steps (joint solves).
+    #[serde(default)]
+    pub rejected: u32,
+    /// Wall time (s).
+    pub seconds: f64,
+}
+
+impl StageCost {
+    /// A stage that started at `started`.
+    pub fn new(stage: &str, frames: usize, iterations: u32, rejected: u32, started: std::time::Instant) -> StageCost {
+        StageCost { stage: stage.into(), frames, iterations, rejected, seconds: started.elapsed().as_secs_f64() }
+    }
+
+    /// One line: `stage 12.3 ms (frames, iterations[+rejected])` per stage.
+    pub fn summary(stages: &[StageCost]) -> String {
+        stages
+            .iter()
+            .map(|s| {
+                let rej = if s.rejected > 0 { format!("+{}", s.rejected) } else { String::new() };
+                format!("{} {:.1} ms ({} fr, {}{rej} it)", s.stage, s.seconds * 1e3, s.frames, s.iterations)
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
 }
 
 impl Calibration {
@@ -141,16 +184,24 @@ pub struct JointState {
 /// What one joint solve did.
 #[derive(Clone, Copy, Debug)]
 pub struct JointOutcome {
+    /// Accepted steps.
     pub iterations: u32,
+    /// Rejected steps (the damping grew).
+    pub rejected: u32,
     pub energy: f64,
     /// Mean over frames of the marker RMSE (m).
     pub rmse_m: f64,
 }
 
-/// Per-frame blocks of the Schur complement.
+/// Per-frame blocks of the Schur complement: `A = L Lᵀ`, `U = L⁻¹ B`, `w = L⁻¹ g_q`, so that
+/// `Bᵀ A⁻¹ B = UᵀU`, `Bᵀ A⁻¹ g_q = Uᵀw` and `Δq = −L⁻ᵀ (w + U Δz)`.
 struct FrameBlocks {
-    ainv_b: DMatrix<f64>,
-    ainv_g: DVector<f64>,
+    l: DMatrix<f64>,
+    u: DMatrix<f64>,
+    w: DVector<f64>,
+    /// The pose gradient and the damping added to `A`'s diagonal (for the predicted decrease).
+    g: DVector<f64>,
+    damping: DVector<f64>,
 }
 
 impl JointProblem<'_> {
@@ -223,9 +274,17 @@ impl JointProblem<'_> {
         let (lo, hi): (Vec<f64>, Vec<f64>) = self.proxy.proxies.iter().map(|p| p.range).unzip();
         let (mut energy, mut rmse) = self.total(state, &scale, &cols);
         let mut lambda = 1e-4;
+        // Nielsen's damping update: λ follows the gain ratio of each kept step; `nu` grows on
+        // consecutive rejections.
+        let mut nu = 2.0;
         let mut iterations = 0;
+        let mut rejected = 0;
         let zero_w = vec![0.0; nm];
-        while iterations < s.calibration_max_iterations && !self.frames.is_empty() {
+        // The cap counts kept steps with the gain-ratio rule (rejected ones are rare there; at
+        // most as many again), every step with the fixed one.
+        let gain_ratio = s.calibration_gain_ratio;
+        let counted = |it: u32, rej: u32| if gain_ratio { (it - rej).max(it / 2) } else { it };
+        while counted(iterations, rejected) < s.calibration_max_iterations && !self.frames.is_empty() {
             iterations += 1;
             let model = self.model_with(&state.offsets);
             let eval = Evaluator::new(&model, self.proxy);
@@ -241,6 +300,7 @@ impl JointProblem<'_> {
                 rhs -= gz;
             }
             let mut blocks: Vec<Option<FrameBlocks>> = Vec::with_capacity(self.frames.len());
+            let mut reduced = DVector::<f64>::zeros(nz);
             for (k, ((obs, p), mw)) in self.frames.iter().zip(&state.poses).zip(self.weights).enumerate() {
                 // Coordinate targets alone (marker weights 0) give the tracking part of H and g.
                 let tp = FrameProblem {
@@ -276,14 +336,13 @@ impl JointProblem<'_> {
                         }
                     }
                 }
-                a += jq.tr_mul(&jq);
+                fixed::add_t_mul_sym(&mut a, 0, 1.0, &jq);
                 gq += jq.tr_mul(&r);
                 // Scale part.
-                let c_ss = js.tr_mul(&js);
                 let g_s = js.tr_mul(&r);
                 let mut b = DMatrix::zeros(nq, nz);
-                b.columns_mut(0, ns).copy_from(&jq.tr_mul(&js));
-                schur.view_mut((0, 0), (ns, ns)).add_assign(&c_ss);
+                fixed::add_t_mul(&mut b, (0, 0), 1.0, &jq, &js);
+                fixed::add_t_mul_sym(&mut schur, 0, 1.0, &js);
                 rhs.rows_mut(0, ns).sub_assign(&g_s);
                 // Offset parts: marker m's rows depend on its own offset through R_b diag(s_b).
                 for (i, &m) in rows.iter().enumerate() {
@@ -306,21 +365,29 @@ impl JointProblem<'_> {
                     schur.view_mut((c, c), (3, 3)).add_assign(&(jo.transpose() * jo));
                     rhs.rows_mut(c, 3).sub_assign(&(jo.transpose() * r_m));
                 }
+                let damping = DVector::from_fn(nq, |d, _| lambda * a[(d, d)].max(s.damping_floor));
                 for d in 0..nq {
-                    a[(d, d)] += lambda * a[(d, d)].max(s.damping_floor);
+                    a[(d, d)] += damping[d];
                 }
                 let Some(chol) = a.cholesky() else {
                     blocks.push(None);
                     continue;
                 };
-                let ainv_b = chol.solve(&b);
-                let ainv_g = chol.solve(&gq);
-                schur -= b.tr_mul(&ainv_b);
-                rhs += b.tr_mul(&ainv_g);
-                blocks.push(Some(FrameBlocks { ainv_b, ainv_g }));
+                let l = chol.unpack();
+                let mut u = b;
+                l.solve_lower_triangular_unchecked_mut(&mut u);
+                let mut w = gq.clone();
+                l.solve_lower_triangular_unchecked_mut(&mut w);
+                fixed::add_t_mul_sym(&mut schur, 0, -1.0, &u);
+                reduced += u.tr_mul(&w);
+                blocks.push(Some(FrameBlocks { l, u, w, g: gq, damping }));
             }
+            // `rhs` so far is −g_z; the poses' elimination adds Σ Uᵀw.
+            let neg_gz = rhs.clone();
+            rhs += reduced;
+            let damping_z = DVector::from_fn(nz, |d, _| lambda * schur[(d, d)].max(s.damping_floor));
             for d in 0..nz {
-                schur[(d, d)] += lambda * schur[(d, d)].max(s.damping_floor);
+                schur[(d, d)] += damping_z[d];
             }
             // Bounds: scale ranges, offsets within the bound around their reference.
             let p_now = &state.poses[0];
@@ -366,13 +433,18 @@ impl JointProblem<'_> {
                     }
                 }
             }
+            // Decrease the damped model predicts, ½ (δᵀ λD δ − gᵀδ) over poses and z.
+            let mut predicted = 0.5 * (dz.dot(&damping_z.component_mul(&dz)) + neg_gz.dot(&dz));
             let ds = dz.rows(0, ns).into_owned();
             for (p, block) in next.poses.iter_mut().zip(&blocks) {
                 for (i, &k) in scale.iter().enumerate() {
                     p[k] = (p[k] + ds[i]).clamp(lo[k], hi[k]);
                 }
                 let Some(fb) = block else { continue };
-                let dq = -(&fb.ainv_g + &fb.ainv_b * &dz);
+                let mut dq = &fb.w + fixed::mul_v(&fb.u, &dz);
+                fb.l.tr_solve_lower_triangular_unchecked_mut(&mut dq);
+                dq.neg_mut();
+                predicted += 0.5 * (dq.dot(&fb.damping.component_mul(&dq)) - fb.g.dot(&dq));
                 for (i, &k) in pose.iter().enumerate() {
                     p[k] = (p[k] + dq[i]).clamp(lo[k], hi[k]);
                 }
@@ -380,23 +452,36 @@ impl JointProblem<'_> {
             let (e1, r1) = self.total(&next, &scale, &cols);
             if e1 < energy {
                 let rel = (energy - e1) / energy.max(f64::MIN_POSITIVE);
+                let energy_before = energy;
                 *state = next;
                 energy = e1;
                 rmse = r1;
-                lambda = (lambda / 3.0).max(1e-9);
+                if gain_ratio {
+                    let rho = if predicted > 0.0 { (energy_before - e1) / predicted } else { 1.0 };
+                    lambda = (lambda * (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0)).max(1e-9);
+                    nu = 2.0;
+                } else {
+                    lambda = (lambda / 3.0).max(1e-9);
+                }
                 // Converged: the objective stopped falling, or the subject stopped moving (scale
                 // factors and offsets changed by less than 1e-5, i.e. 10 µm on a metre).
                 if rel < s.calibration_rel_tol || dz.amax() < 1e-5 {
                     break;
                 }
             } else {
-                lambda *= 4.0;
+                rejected += 1;
+                if gain_ratio {
+                    lambda *= nu;
+                    nu *= 2.0;
+                } else {
+                    lambda *= 4.0;
+                }
                 if lambda > 1e8 {
                     break;
                 }
             }
         }
-        JointOutcome { iterations, energy, rmse_m: rmse }
+        JointOutcome { iterations: iterations - rejected, rejected, energy, rmse_m: rmse }
     }
 }
 
@@ -507,6 +592,7 @@ pub fn finish(
         posture: Default::default(),
         registration_report: Default::default(),
         functional_centres: Vec::new(),
+        stages: Vec::new(),
     }
 }
 

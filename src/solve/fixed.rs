@@ -57,6 +57,59 @@ pub fn mul_v(a: &DMatrix<f64>, v: &DVector<f64>) -> DVector<f64> {
     })
 }
 
+/// `Σ_k a_k b_k` as four interleaved partial sums (`k` mod 4) added as `(s0 + s1) + (s2 + s3)`,
+/// then the remaining terms in order: a fixed order that the compiler may run in SIMD lanes.
+fn dot4(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len());
+    let (mut s0, mut s1, mut s2, mut s3) = (0.0, 0.0, 0.0, 0.0);
+    let mut k = 0;
+    while k + 4 <= n {
+        s0 += a[k] * b[k];
+        s1 += a[k + 1] * b[k + 1];
+        s2 += a[k + 2] * b[k + 2];
+        s3 += a[k + 3] * b[k + 3];
+        k += 4;
+    }
+    let mut s = (s0 + s1) + (s2 + s3);
+    while k < n {
+        s += a[k] * b[k];
+        k += 1;
+    }
+    s
+}
+
+/// Column `j` of `a` as a slice (nalgebra stores columns contiguously).
+fn col(a: &DMatrix<f64>, j: usize) -> &[f64] {
+    let n = a.nrows();
+    &a.as_slice()[j * n..(j + 1) * n]
+}
+
+/// `out += α aᵀ b` into the block of `out` at `(i0, j0)` (columns dotted as [`dot4`] does).
+pub fn add_t_mul(out: &mut DMatrix<f64>, (i0, j0): (usize, usize), alpha: f64, a: &DMatrix<f64>, b: &DMatrix<f64>) {
+    assert_eq!(a.nrows(), b.nrows(), "add_t_mul: ({}×{})ᵀ · {}×{}", a.nrows(), a.ncols(), b.nrows(), b.ncols());
+    for j in 0..b.ncols() {
+        let bj = col(b, j);
+        for i in 0..a.ncols() {
+            out[(i0 + i, j0 + j)] += alpha * dot4(col(a, i), bj);
+        }
+    }
+}
+
+/// `out += α aᵀ a` into the square block of `out` at `(o, o)`: the upper triangle computed (as
+/// [`dot4`] does), the lower one mirrored from it, so the block stays exactly symmetric.
+pub fn add_t_mul_sym(out: &mut DMatrix<f64>, o: usize, alpha: f64, a: &DMatrix<f64>) {
+    for j in 0..a.ncols() {
+        let aj = col(a, j);
+        for i in 0..=j {
+            let v = alpha * dot4(col(a, i), aj);
+            out[(o + i, o + j)] += v;
+            if i != j {
+                out[(o + j, o + i)] += v;
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -70,5 +123,11 @@ mod tests {
         assert_eq!(mul_t(&a, &b.transpose()), &a * &b);
         assert_eq!(t_mul(&a.transpose(), &b), &a * &b);
         assert_eq!(mul_v(&a, &v), &a * &v);
+        let mut out = DMatrix::zeros(11, 11);
+        add_t_mul(&mut out, (1, 2), 2.0, &a, &a);
+        assert_eq!(out.view((1, 2), (9, 9)), a.transpose() * &a * 2.0);
+        let mut sym = DMatrix::zeros(10, 10);
+        add_t_mul_sym(&mut sym, 1, -1.0, &a);
+        assert_eq!(sym.view((1, 1), (9, 9)), -(a.transpose() * &a));
     }
 }

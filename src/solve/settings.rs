@@ -94,6 +94,13 @@ pub struct SolverSettings {
     /// Calibration stops when an accepted step lowers its objective by less than this fraction.
     /// Default 1e-6 (the scales then move by far less than their uncertainty).
     pub calibration_rel_tol: f64,
+    /// Levenberg–Marquardt damping of calibration from the gain ratio (Nielsen's rule: `λ` follows
+    /// how well the damped model predicted each kept step; the iteration cap counts kept steps)
+    /// instead of the fixed rule (÷3 after a kept step, ×4 after a rejected one; the cap counts
+    /// every step). Default false: the gain-ratio rule converges where the fixed one stops at its
+    /// cap (the OpenCap subject: 37 + 35 steps instead of 50 + 50, a lower objective), but the
+    /// converged Rajagopal subject has a foot scale 3.16 σ from its prior (docs/CALIBRATION.md).
+    pub calibration_gain_ratio: bool,
     /// Marker placement after calibration (OpenSim's MarkerPlacer): every marker not flagged
     /// `fixed` moves to where the calibration frames observed it on its body. When some markers
     /// are flagged fixed, only those inform the scales (the others are untrusted until placed).
@@ -112,6 +119,12 @@ pub struct SolverSettings {
     /// all of the subject's trials (`calibration_frames` applies to a static trial). Default 96
     /// (48 gives 0.7 mm more RMSE on the OpenCap subject; calibration time grows linearly).
     pub calibration_frames_motion: usize,
+    /// Time between the frames tracked (pose only, each warm-started from the one before) from a
+    /// trial's first usable frame to its calibration frames, so that each calibration frame
+    /// starts in the motion's basin (s). Every frame at or below `1 / rate`; calibration frames are
+    /// always tracked. Default 0.05 (every fifth frame at 100 Hz, every third at 60 Hz; 0 tracks
+    /// every frame, as before; what it changes: docs/CALIBRATION.md, "Cost").
+    pub calibration_track_step_s: f64,
     /// Marker registration: calibration estimates every marker's body-frame offset together with
     /// the scales and the calibration poses, offsets held near the model's (anatomical markers
     /// strongly, tracking markers weakly). Default true; off with `--no-register`, and an
@@ -200,10 +213,12 @@ impl Default for SolverSettings {
             calibration_scale_prior: 1e-6,
             calibration_max_iterations: 50,
             calibration_rel_tol: 1e-6,
+            calibration_gain_ratio: false,
             marker_placement: false,
             presolve: Presolve::default(),
             presolve_sweeps: 2,
             calibration_frames_motion: 96,
+            calibration_track_step_s: 0.05,
             registration: true,
             registration_anatomical_sd_m: 0.004,
             registration_tracking_sd_m: 0.1,
