@@ -127,7 +127,12 @@ pub fn calibrate(
         let static_input = static_input.or_else(|| s.static_path.map(Input::Path));
         let load = |i: &Input| i.load(&ctx).map_err(|e| PyErr::new::<MarkerFileError, _>(message(&e)));
         let statics = static_input.as_ref().map(load).transpose()?;
-        let motions = trials.iter().map(load).collect::<PyResult<Vec<_>>>()?;
+        let mut motions = trials.iter().map(load).collect::<PyResult<Vec<_>>>()?;
+        // Labels screened as `smocap solve` screens them (swaps repaired, jumps masked) before
+        // they inform the calibration.
+        for (n, t, _) in &mut motions {
+            session::screen_labels(&ctx, n, t);
+        }
         let statics: Vec<(&str, &_)> = statics.iter().map(|(n, t, _)| (n.as_str(), t)).collect();
         let motions: Vec<(&str, &_)> = motions.iter().map(|(n, t, _)| (n.as_str(), t)).collect();
         if statics.is_empty() && motions.is_empty() {
@@ -231,15 +236,17 @@ impl Subject {
         let threads = threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
         let (generic, cal) = (self.generic.clone(), self.cal.clone());
         let motion = py.detach(move || -> PyResult<Motion> {
-            let (name, trial, input) =
+            let (name, mut trial, input) =
                 input.load(&generic).map_err(|e| PyErr::new::<MarkerFileError, _>(message(&e)))?;
+            let qc = session::screen_labels(&generic, &name, &mut trial);
             let eval = cal.ctx.evaluator();
             let mut chosen = smocap::pipeline::device::choose(choice, &eval, smocap::kinematics::gpu::DEFAULT_CAP)
                 .map_err(to_py::<SolveError>)?;
             let lanes = lanes.unwrap_or_else(|| chosen.default_lanes(threads));
             let mut notes: Vec<String> = chosen.note().map(|n| format!("note: {n}")).into_iter().collect();
-            let j = session::solve_judged(&cal, &name, &trial, &input, threads, lanes, chosen.backend(), None)
+            let mut j = session::solve_judged(&cal, &name, &trial, &input, threads, lanes, chosen.backend(), None)
                 .map_err(PyErr::new::<SolveError, _>)?;
+            session::attach_label_qc(&mut j, qc);
             notes.extend(j.notes);
             Ok(Motion { cal, trial: Arc::new(trial), result: j.result, report: j.report, notes })
         })?;

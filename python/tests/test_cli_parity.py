@@ -14,7 +14,12 @@ TIMINGS = {"ms_per_frame", "solve_wall_s", "seconds"}
 
 
 def without_timings(d):
-    return {k: v for k, v in d.items() if k not in TIMINGS}
+    """`d` without its timings, at any depth (a calibration's cost per stage holds some)."""
+    if isinstance(d, dict):
+        return {k: without_timings(v) for k, v in d.items() if k not in TIMINGS}
+    if isinstance(d, list):
+        return [without_timings(v) for v in d]
+    return d
 
 
 def cli_solve(cli, tmp, trials, *args):
