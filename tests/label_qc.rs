@@ -325,5 +325,24 @@ fn cli_repairs_and_lists_the_swaps_of_the_issue() {
         assert_eq!((m.to_string(), *a, *b, "repaired".to_string()), g.clone());
     }
     assert!(stderr.contains("label QC: swap"), "{stderr}");
+    // `convert` screens every trial the same way; `--label-qc off` leaves them as they are.
+    std::fs::create_dir_all(dir.join("data/s01")).expect("data dir");
+    std::fs::copy(p("w.trc"), dir.join("data/s01/w.trc")).expect("copy");
+    let toml = "[[dataset]]\nname = \"lab\"\nroot = \"data\"\ntrials = [\"*/*.trc\"]\n";
+    std::fs::write(dir.join("datasets.toml"), toml).expect("toml");
+    for (mode, want) in [(None, 3), (Some("off"), 0)] {
+        let (out_dir, summary) = (p(&format!("out-{want}")), p(&format!("summary-{want}.json")));
+        let mut cmd = Command::new(bin);
+        cmd.args(["convert", &p("datasets.toml"), "--out", &out_dir, "--report-json", &summary, "--quiet"]);
+        if let Some(m) = mode {
+            cmd.args(["--label-qc", m]);
+        }
+        let out = cmd.output().expect("convert");
+        assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+        let s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&summary).expect("summary")).expect("json");
+        let events = s["trials"][0]["label_qc"].as_array().map_or(0, Vec::len);
+        assert_eq!(events, want, "--label-qc {mode:?}: {}", s["trials"][0]);
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -113,6 +113,7 @@ pub fn convert<'py>(
             window_frames: smocap::archive::trial_job::WINDOW_FRAMES,
             backend,
             lanes,
+            label_qc: None,
         };
         // A status line every `every` while the conversion runs, as the command line prints
         // when stderr is not a terminal.

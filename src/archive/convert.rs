@@ -57,6 +57,9 @@ pub struct ConvertOptions {
     /// backend; on the CPU backend, setting it solves trials in batches too (else one lane per
     /// trial, trials in parallel).
     pub lanes: Option<usize>,
+    /// Label quality control for every trial (`--label-qc`), over what the datasets' settings
+    /// say; `None` keeps theirs (default `repair`).
+    pub label_qc: Option<crate::pipeline::label_qc::QcMode>,
 }
 
 /// Trials solved together at most: each holds a writer thread (its 1 MiB chunk and zstd
@@ -521,6 +524,9 @@ fn subject(
             Err(e) => return ([outcomes, fail_all(format!("datasets.toml [settings]: {e}"))].concat(), None),
         }
         sub.ctx.settings.qp = crate::solve::backend_for(sub.ctx.settings.qp, &sub.ctx.proxy);
+    }
+    if let Some(mode) = opt.label_qc {
+        sub.ctx.settings.label_qc.mode = mode;
     }
     let input = d.input_options();
     // Calibrate as `solve` does: the static trial (when there is one) and the motion trials whose

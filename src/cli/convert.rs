@@ -75,6 +75,12 @@ pub struct ConvertArgs {
     /// lane count changes the speed, not the result.
     #[arg(long)]
     pub lanes: Option<usize>,
+    /// Label quality control of every trial (swapped labels, jumps, ghosts): `repair` (default:
+    /// exchanges repaired, jumps masked), `flag` (reported, data unchanged, trial suspect) or
+    /// `off`; overrides the datasets' `[settings] label_qc`. Events go into each file's
+    /// `smocap.run` metadata and the summary.
+    #[arg(long, value_enum)]
+    pub label_qc: Option<crate::pipeline::label_qc::QcMode>,
 }
 
 fn parse_epoch(s: &str) -> Result<u64, String> {
@@ -116,6 +122,7 @@ pub fn run(a: ConvertArgs) -> anyhow::Result<u8> {
         window_frames: a.window_frames,
         backend,
         lanes: a.lanes,
+        label_qc: a.label_qc,
     };
     let every = Duration::try_from_secs_f64(a.progress_every)
         .ok()
