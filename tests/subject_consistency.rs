@@ -184,3 +184,25 @@ fn converting_a_subject_folder_that_mixes_two_people_makes_its_trials_suspect() 
     assert!(err.contains("height 1.505 m"), "the prior took the recorded height: {err}");
     let _ = std::fs::remove_dir_all(&d);
 }
+
+#[test]
+fn a_trial_of_another_person_among_a_subjects_trials_is_named_from_its_fit() {
+    // TRC files say nothing of their subject: the fit under the calibrated morphology does.
+    let d = dir("misfit");
+    let write = |name: &str, t: &MarkerTrial| {
+        let p = d.join(format!("{name}.trc"));
+        smocap::io::trc::write_trc(&p, t, "mm").unwrap();
+        p
+    };
+    let own: Vec<PathBuf> = [3, 4, 6].iter().map(|&s| write(&format!("ann{s}"), &trial(s, 0.0))).collect();
+    let bob = write("bob", &trial(5, 0.3));
+    let (code, r, err) = solve(&[own.clone(), vec![bob]].concat(), &d.join("mixed.json"));
+    assert_eq!(code, 3, "{err}");
+    let why = r["calibration"]["warnings"].to_string();
+    assert!(why.contains("bob.trc fits the calibrated subject far worse"), "{why}");
+    assert!(!why.contains("ann"), "only the odd trial is named: {why}");
+    let (_, r, err) = solve(&own, &d.join("own.json"));
+    let why = r["calibration"]["warnings"].to_string();
+    assert!(!why.contains("far worse"), "{why}\n{err}");
+    let _ = std::fs::remove_dir_all(&d);
+}

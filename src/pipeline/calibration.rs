@@ -269,8 +269,10 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     let mut pooled: Vec<f64> = Vec::new();
     let mut starts: Vec<Vec<f64>> = Vec::new();
     let mut kinds: Vec<Kind> = Vec::new();
+    // Each calibration frame's trial (index in statics, then motions).
+    let mut trial_of: Vec<usize> = Vec::new();
     let inputs = statics.iter().map(|t| (t, Kind::Static)).chain(motions.iter().map(|t| (t, Kind::Motion)));
-    for ((name, t), kind) in inputs {
+    for (input, ((name, t), kind)) in inputs.enumerate() {
         let wanted =
             if kind == Kind::Static { settings.calibration_frames } else { settings.calibration_frames_motion };
         let count = if kind == Kind::Static { statics.len() } else { motions.len() };
@@ -328,6 +330,7 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
                     pooled.extend_from_slice(row);
                     starts.push(p.to_vec());
                     kinds.push(kind);
+                    trial_of.push(input);
                 }
             }
             a = b;
@@ -439,6 +442,24 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     cal.registration_report = registration_report(ctx, &cal);
     cal.functional_centres =
         super::joint_centres::functional_centres(&ctx.model, &ctx.proxy, &slices, &cal.frame_proxies);
+    // How each motion trial's calibration frames fit the calibrated subject, against its siblings.
+    let mut model = ctx.model.clone();
+    if let Some(o) = &cal.marker_offsets {
+        model.markers.iter_mut().zip(o).for_each(|(m, o)| m.offset = *o);
+    }
+    let fit = crate::kinematics::assembly::Evaluator::new(&model, &ctx.proxy);
+    let mut ws = crate::kinematics::assembly::EvalWorkspace::new(&model, &ctx.proxy);
+    let mut per_trial: Vec<Vec<f64>> = vec![Vec::new(); statics.len() + motions.len()];
+    for (k, (frame, p)) in slices.iter().zip(&cal.frame_proxies).enumerate() {
+        let fp = FrameProblem { observed: frame, marker_weights: w_all[k], tracking_ref: &[], tracking_weights: &[] };
+        let (_, sq, used) = fit.energy(p, &fp, &mut ws);
+        if used > 0 {
+            per_trial[trial_of[k]].push((sq / used as f64).sqrt());
+        }
+    }
+    let motion_fits: Vec<(&str, Vec<f64>)> =
+        motions.iter().zip(per_trial.into_iter().skip(statics.len())).map(|((n, _), r)| (*n, r)).collect();
+    cal.trial_misfits = super::subject_check::misfits(&motion_fits);
     let report = prior_report(ctx, &pri, &scale, &cal);
     if let Some(h) = report.stature_m.filter(|h| !(0.5..=2.6).contains(h)) {
         let trial = statics.iter().chain(motions).map(|(n, _)| *n).collect::<Vec<_>>().join(", ");

@@ -74,6 +74,41 @@ pub fn inconsistencies(records: &[(String, C3dSubject)]) -> Vec<String> {
     out
 }
 
+/// A trial fits far worse than its siblings when its calibration frames' median marker RMSE is
+/// more than this factor of its siblings' median...
+pub const MISFIT_RATIO: f64 = 2.0;
+/// ...and more than this much above it (m): a trial of another person (or with markers placed
+/// differently) fits the one calibrated morphology by centimetres worse, noise by millimetres.
+pub const MISFIT_EXCESS_M: f64 = 0.010;
+
+/// Why some of the trials calibrated together do not belong with the others (empty when none):
+/// `fits` holds each motion trial's per-frame marker RMSE (m) on its calibration frames under the
+/// calibrated subject; a trial whose median is beyond [`MISFIT_RATIO`] times and
+/// [`MISFIT_EXCESS_M`] above the median of its siblings' medians is named. Needs two trials.
+pub fn misfits(fits: &[(&str, Vec<f64>)]) -> Vec<String> {
+    let median = |v: &mut Vec<f64>| -> Option<f64> {
+        v.retain(|x| x.is_finite());
+        v.sort_by(f64::total_cmp);
+        (!v.is_empty()).then(|| 0.5 * (v[(v.len() - 1) / 2] + v[v.len() / 2]))
+    };
+    let medians: Vec<Option<f64>> = fits.iter().map(|(_, r)| median(&mut r.clone())).collect();
+    let mut out = Vec::new();
+    for (i, (name, _)) in fits.iter().enumerate() {
+        let Some(own) = medians[i] else { continue };
+        let mut others: Vec<f64> =
+            medians.iter().enumerate().filter(|(j, _)| *j != i).filter_map(|(_, m)| *m).collect();
+        let Some(sib) = median(&mut others) else { continue };
+        if own > MISFIT_RATIO * sib && own > sib + MISFIT_EXCESS_M {
+            out.push(format!(
+                "trial {name} fits the calibrated subject far worse than its siblings (calibration frames' marker RMSE {:.1} mm against {:.1} mm): another person's trial, or its markers placed differently",
+                own * 1e3,
+                sib * 1e3
+            ));
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -88,6 +123,18 @@ mod tests {
         let why = inconsistencies(&[rec("Ann", 1.505), rec("Bob", 1.79)]);
         assert_eq!(why.len(), 2, "{why:?}");
         assert!(why[0].contains("Ann") && why[0].contains("Bob") && why[1].contains("1.505"));
+    }
+
+    #[test]
+    fn a_trial_fitting_centimetres_worse_than_its_siblings_is_named_and_noise_is_not() {
+        let t = |name: &'static str, mm: f64| (name, vec![mm * 1e-3, mm * 1.1e-3, mm * 0.9e-3]);
+        let why = misfits(&[t("a", 7.0), t("b", 8.0), t("c", 7.5), t("other", 28.0)]);
+        assert_eq!(why.len(), 1, "{why:?}");
+        assert!(why[0].contains("trial other") && why[0].contains("28.0 mm"), "{why:?}");
+        // Twice as bad but by millimetres (a clean static against a walk): not named.
+        assert!(misfits(&[t("a", 2.0), t("b", 5.0), t("c", 2.5)]).is_empty());
+        // One trial has no sibling to compare with.
+        assert!(misfits(&[t("a", 30.0)]).is_empty());
     }
 
     #[test]

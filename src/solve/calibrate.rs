@@ -66,6 +66,11 @@ pub struct Calibration {
     /// The root's joints (the hips) found from the motion against the calibrated model's.
     #[serde(default)]
     pub functional_centres: Vec<super::prior::FunctionalCentre>,
+    /// Motion trials whose calibration frames the calibrated subject fits far worse than their
+    /// siblings' (`pipeline::subject_check::misfits`): another person's trial, or markers placed
+    /// differently. Makes the calibration suspect.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub trial_misfits: Vec<String>,
     /// What each stage cost (tracking, each joint solve, the report), in order.
     #[serde(default)]
     pub stages: Vec<StageCost>,
@@ -124,6 +129,7 @@ impl Calibration {
         }
         out.extend(self.posture.suspect.iter().cloned());
         out.extend(self.registration_report.suspect.iter().cloned());
+        out.extend(self.trial_misfits.iter().cloned());
         out
     }
 
@@ -592,6 +598,7 @@ pub fn finish(
         posture: Default::default(),
         registration_report: Default::default(),
         functional_centres: Vec::new(),
+        trial_misfits: Vec::new(),
         stages: Vec::new(),
     }
 }
