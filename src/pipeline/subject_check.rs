@@ -88,8 +88,7 @@ pub const MISFIT_EXCESS_M: f64 = 0.010;
 pub fn misfits(fits: &[(&str, Vec<f64>)]) -> Vec<String> {
     let median = |v: &mut Vec<f64>| -> Option<f64> {
         v.retain(|x| x.is_finite());
-        v.sort_by(f64::total_cmp);
-        (!v.is_empty()).then(|| 0.5 * (v[(v.len() - 1) / 2] + v[v.len() / 2]))
+        (!v.is_empty()).then(|| crate::solve::median(v))
     };
     let medians: Vec<Option<f64>> = fits.iter().map(|(_, r)| median(&mut r.clone())).collect();
     let mut out = Vec::new();

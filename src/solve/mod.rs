@@ -17,6 +17,18 @@ pub use presolve::Presolver;
 pub use settings::{Presolve, QpBackend, SolverSettings, WarmStart};
 pub use trqp::{FrameSolver, FrameStats, FrameStatus};
 
+/// The median of `v` (sorted in place; the mean of the two middle values for an even count).
+/// `v` must not be empty.
+pub fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
 /// A QP backend as the settings name it.
 pub fn make_qp(kind: QpBackend) -> Box<dyn qp::QpSolver> {
     match kind {

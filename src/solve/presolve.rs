@@ -366,17 +366,7 @@ pub fn outlier_threshold(values: &[f64]) -> f64 {
     if v.is_empty() {
         return f64::NAN;
     }
-    let med = median(&mut v);
+    let med = super::median(&mut v);
     let mut dev: Vec<f64> = v.iter().map(|x| (x - med).abs()).collect();
-    med + 6.0 * median(&mut dev)
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
+    med + 6.0 * super::median(&mut dev)
 }
