@@ -40,7 +40,7 @@ PER_FRAME = {
     "/tf": "foxglove.FrameTransforms",
     "/markers": "foxglove.PointCloud",
 }
-ONCE = {"/scene": "foxglove.SceneUpdate", "/smocap/subject": "smocap.Subject"}
+ONCE = {"/scene": "foxglove.SceneUpdate", "/smocap/subject": "smocap.Subject", "/smocap/label_qc": "smocap.LabelQc"}
 
 
 def official_class(full_name):

@@ -170,7 +170,7 @@ fn writing_frames_allocates_far_less_than_once_per_frame() {
     let out = dir.join("t.mcap");
     let names = TrialNames::default();
     let opt = WriterOptions { chunk_size: 1 << 30, ..WriterOptions::default() };
-    let mut w = TrialWriter::create(&out, &ctx, &s.trial, &cal, &names, &opt).unwrap();
+    let mut w = TrialWriter::create(&out, &ctx, &s.trial, &cal, &names, None, &opt).unwrap();
     let stats = FrameStats {
         iterations: 1,
         accepted: 1,

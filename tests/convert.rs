@@ -96,6 +96,7 @@ fn shipped_synthetic_dataset_converts_to_mcap_that_reads_back() {
             ("/markers", "foxglove.PointCloud", frames),
             ("/scene", "foxglove.SceneUpdate", 1),
             ("/smocap/subject", "smocap.Subject", 1),
+            ("/smocap/label_qc", "smocap.LabelQc", 1),
         ] {
             let c = schema(topic);
             assert_eq!((c.schema.as_str(), c.encoding.as_str(), c.messages), (name, "protobuf", n), "{topic}");
@@ -122,11 +123,12 @@ fn shipped_synthetic_dataset_converts_to_mcap_that_reads_back() {
                 "/tf" => drop(proto::FrameTransforms::decode(&msg.data[..]).unwrap()),
                 "/markers" => drop(proto::PointCloud::decode(&msg.data[..]).unwrap()),
                 "/scene" => drop(proto::SceneUpdate::decode(&msg.data[..]).unwrap()),
+                "/smocap/label_qc" => drop(proto::LabelQc::decode(&msg.data[..]).unwrap()),
                 t => panic!("unexpected topic {t}"),
             }
             n += 1;
         }
-        assert_eq!(n, 4 * frames + 2);
+        assert_eq!(n, 4 * frames + 3);
     }
     // inspect on the command line.
     let o = smocap(&["inspect", mcaps[0].to_str().unwrap()]);

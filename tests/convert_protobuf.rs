@@ -1,7 +1,7 @@
 //! The protobuf MCAP files of `smocap convert`: every channel decodes with the messages of
 //! `proto/` and its schema record carries a descriptor set naming its message; `/tf` is one tree
 //! rooted at a Z-up `world` (the head above the feet, for the shipped Z-up model and for an
-//! OpenSim Y-up one); the skeleton and the subject are sent once; files are byte-identical
+//! OpenSim Y-up one); the skeleton, the subject and the label QC are sent once; files are byte-identical
 //! across runs; `--epoch` sets the log times.
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
@@ -146,7 +146,13 @@ fn every_channel_decodes_and_the_skeleton_and_subject_come_once() {
     let (dir, path) = converted("decode", frames, &[]);
     let by = messages(&path);
     let topics: Vec<&str> = by.keys().map(String::as_str).collect();
-    assert_eq!(topics, ["/markers", "/scene", "/smocap/state", "/smocap/stats", "/smocap/subject", "/tf"]);
+    assert_eq!(
+        topics,
+        ["/markers", "/scene", "/smocap/label_qc", "/smocap/state", "/smocap/stats", "/smocap/subject", "/tf"]
+    );
+    assert_eq!(by["/smocap/label_qc"].len(), 1);
+    let qc = proto::LabelQc::decode(&by["/smocap/label_qc"][0].1[..]).unwrap();
+    assert_eq!((qc.mode.as_str(), qc.events.len(), qc.suspect.as_str()), ("repair", 0, ""), "{qc:?}");
     let sub = proto::Subject::decode(&by["/smocap/subject"][0].1[..]).unwrap();
     assert_eq!(by["/smocap/subject"].len(), 1);
     assert_eq!(by["/scene"].len(), 1);

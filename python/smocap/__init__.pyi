@@ -270,6 +270,13 @@ class Trial:
     @property
     def subject(self) -> Dict[str, Any]:
         """Names (coordinates, bodies, markers, ...) and calibrated ``scales`` by body."""
+    @property
+    def label_qc(self) -> Optional[Dict[str, Any]]:
+        """The label quality control (``/smocap/label_qc``): ``mode``, ``rigid_pairs``,
+        ``masked_frames``, ``masked_share``, ``suspect`` and ``events`` (dicts: ``kind``,
+        ``markers``, ``first_frame``, ``last_frame``, ``first_time``, ``last_time`` (s),
+        ``detected_frames``, ``action``, ``residual_before_mm``, ``residual_after_mm``); None
+        for files written without it."""
     def to_mot(self, path: _PathLike) -> None:
         """Writes OpenSim's ``.mot`` as ``smocap export --mot`` does."""
     def __len__(self) -> int: ...

@@ -147,6 +147,51 @@ impl Trial {
         Ok(d)
     }
 
+    /// The label quality control, from `/smocap/label_qc` (None for files written before it):
+    /// `mode`, `rigid_pairs`, `masked_frames`, `masked_share`, `suspect` (None when not), and
+    /// `events`, a list of dicts (pandas-ready: `pd.DataFrame(trial.label_qc["events"])`) with
+    /// `kind`, `markers`, `first_frame`, `last_frame`, `first_time`, `last_time` (s, the frames'
+    /// times as in `q`'s index), `detected_frames`, `action`, `residual_before_mm`,
+    /// `residual_after_mm` (None for masks).
+    #[getter]
+    fn label_qc<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(qc) = &self.rec.label_qc else { return Ok(None) };
+        let d = PyDict::new(py);
+        d.set_item("mode", &qc.mode)?;
+        d.set_item("rigid_pairs", qc.rigid_pairs)?;
+        d.set_item("masked_frames", qc.masked_frames)?;
+        d.set_item("masked_share", qc.masked_share)?;
+        d.set_item("suspect", (!qc.suspect.is_empty()).then_some(&qc.suspect))?;
+        // A frame's time as in `q`'s index (None when that frame was not written).
+        let secs = |frame: u32| {
+            self.rec
+                .frames
+                .iter()
+                .find(|f| f.state.frame == frame as usize)
+                .map(|f| f.state.time + self.rec.time_offset)
+        };
+        let events = qc
+            .events
+            .iter()
+            .map(|e| {
+                let ev = PyDict::new(py);
+                ev.set_item("kind", &e.kind)?;
+                ev.set_item("markers", &e.markers)?;
+                ev.set_item("first_frame", e.first_frame)?;
+                ev.set_item("last_frame", e.last_frame)?;
+                ev.set_item("first_time", secs(e.first_frame))?;
+                ev.set_item("last_time", secs(e.last_frame))?;
+                ev.set_item("detected_frames", e.detected_frames)?;
+                ev.set_item("action", &e.action)?;
+                ev.set_item("residual_before_mm", e.residual_before_mm)?;
+                ev.set_item("residual_after_mm", e.residual_after_mm.is_finite().then_some(e.residual_after_mm))?;
+                Ok(ev)
+            })
+            .collect::<PyResult<Vec<_>>>()?;
+        d.set_item("events", events)?;
+        Ok(Some(d))
+    }
+
     /// Writes the coordinates as OpenSim's `.mot`, as `smocap export --mot` does (the
     /// conversion's model gives the order and which coordinates are in degrees).
     fn to_mot(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {

@@ -34,6 +34,9 @@ def test_convert_then_read_trial(cli, tmp):
     assert np.isfinite(trial.markers).any()
     scales = trial.subject["scales"]
     assert set(scales) == set(trial.subject["bodies"]) and all(0.5 < v < 2 for s in scales.values() for v in s)
+    # The label quality control of the trial (clean synthetic labels: screened, nothing found).
+    qc = trial.label_qc
+    assert qc["mode"] == "repair" and qc["events"] == [] and qc["suspect"] is None and qc["rigid_pairs"] > 0
     # The .mot as `smocap export --mot` writes it.
     trial.to_mot(tmp / "py.mot")
     cli("export", path, "--mot", tmp / "cli.mot")

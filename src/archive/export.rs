@@ -72,6 +72,8 @@ pub struct TrialRecord {
     pub subject: Option<proto::Subject>,
     /// The `/smocap/stats` messages by frame (protobuf files).
     pub stats: BTreeMap<usize, proto::SolverStats>,
+    /// The `/smocap/label_qc` message, when the file has one.
+    pub label_qc: Option<proto::LabelQc>,
 }
 
 /// Reads the frames of `path` (a file written by `smocap convert`: protobuf channels, or the
@@ -121,6 +123,7 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
     let mut rmse = BTreeMap::new();
     let mut status = BTreeMap::new();
     let mut subject: Option<proto::Subject> = None;
+    let mut label_qc: Option<proto::LabelQc> = None;
     let mut raw_states: Vec<proto::State> = Vec::new();
     let mut observed = BTreeMap::new();
     let mut stats = BTreeMap::new();
@@ -138,6 +141,7 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
             let data = &msg.data[..];
             match topic {
                 "/smocap/subject" => subject = Some(proto::Subject::decode(data).map_err(|e| what(&e))?),
+                "/smocap/label_qc" => label_qc = Some(proto::LabelQc::decode(data).map_err(|e| what(&e))?),
                 "/smocap/state" => raw_states.push(proto::State::decode(data).map_err(|e| what(&e))?),
                 "/markers" => {
                     let c = proto::PointCloud::decode(data).map_err(|e| what(&e))?;
@@ -201,6 +205,7 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
         observed,
         subject,
         stats,
+        label_qc,
     })
 }
 

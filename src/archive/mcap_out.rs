@@ -22,6 +22,7 @@ use crate::io::MarkerTrial;
 use crate::kinematics::cpu::{self, Workspace};
 use crate::model::proxy::ProxyKind;
 use crate::model::CoordinateKind;
+use crate::pipeline::label_qc::LabelQc;
 use crate::pipeline::{Context, SolvedFrame};
 use crate::solve::{Calibration, FrameStatus};
 use mcap::records::{MessageHeader, Metadata};
@@ -215,13 +216,15 @@ pub struct TrialWriter<'a> {
 impl<'a> TrialWriter<'a> {
     /// Starts `out` (as its temporary file) for `trial`, solved with `ctx` for a
     /// subject calibrated as `calibration`; writes the schemas, channels and the once-per-trial
-    /// messages (`/scene`, `/smocap/subject`).
+    /// messages (`/scene`, `/smocap/subject`, `/smocap/label_qc` from `label_qc`: mode `off`
+    /// when `None`).
     pub fn create(
         out: &Path,
         ctx: &'a Context,
         trial: &'a MarkerTrial,
         calibration: &Calibration,
         names: &TrialNames,
+        label_qc: Option<&LabelQc>,
         opt: &WriterOptions,
     ) -> Result<Self, McapOutError> {
         let tmp = partial_path(out);
@@ -297,7 +300,7 @@ impl<'a> TrialWriter<'a> {
         let up = ctx.up.map_or("none".into(), |u| format!("[{}, {}, {}]", u.x + 0.0, u.y + 0.0, u.z + 0.0));
         let wfm = format!("[{}, {}, {}, {}]", root.i + 0.0, root.j + 0.0, root.k + 0.0, root.w);
         let w = tw.w.as_mut().expect("just set");
-        let mut ids = [0u16; 6];
+        let mut ids = [0u16; schemas::CHANNELS.len()];
         for (id, c) in ids.iter_mut().zip(schemas::CHANNELS) {
             *id = add_channel(w, &c, &up, &wfm).map_err(mc)?;
         }
@@ -307,6 +310,8 @@ impl<'a> TrialWriter<'a> {
         let subject = tw.subject(calibration, names, &root, start);
         tw.write(ids[4], 0, tw.epoch_ns, &scene)?;
         tw.write(ids[5], 0, tw.epoch_ns, &subject)?;
+        let qc = tw.label_qc(label_qc.unwrap_or(&LabelQc::off()), start);
+        tw.write(ids[6], 0, tw.epoch_ns, &qc)?;
         Ok(tw)
     }
 
@@ -418,6 +423,45 @@ impl<'a> TrialWriter<'a> {
         }
     }
 
+    /// The `/smocap/label_qc` message: `qc`'s events with their frames' log times.
+    fn label_qc(&self, qc: &LabelQc, stamp: Timestamp) -> proto::LabelQc {
+        let at = |f: usize| Some(Timestamp::from_ns(self.log_ns(f)));
+        proto::LabelQc {
+            timestamp: Some(stamp),
+            mode: qc.mode.as_str().into(),
+            rigid_pairs: qc.rigid_pairs as u32,
+            events: qc
+                .events
+                .iter()
+                .map(|e| proto::LabelEvent {
+                    kind: e.kind.as_str().into(),
+                    markers: e.markers.clone(),
+                    first_frame: e.first_frame as u32,
+                    last_frame: e.last_frame as u32,
+                    first_time: at(e.first_frame),
+                    last_time: at(e.last_frame),
+                    detected_frames: e.detected_frames as u32,
+                    action: e.action.as_str().into(),
+                    residual_before_mm: e.residual_before_mm,
+                    residual_after_mm: e.residual_after_mm.unwrap_or(f64::NAN),
+                })
+                .collect(),
+            masked_frames: qc.masked_frames as u32,
+            masked_share: qc.masked_share,
+            suspect: qc.suspect.clone().unwrap_or_default(),
+        }
+    }
+
+    /// Log time of frame `f` (ns): the epoch plus its time since the trial's first sample.
+    fn log_ns(&self, f: usize) -> u64 {
+        self.epoch_ns + (self.since_start(f).max(0.0) * 1e9).round() as u64
+    }
+
+    /// Frame `f`'s time since the trial's first sample (s).
+    fn since_start(&self, f: usize) -> f64 {
+        self.trial.times.get(f).copied().unwrap_or(f as f64 / self.trial.rate_hz.max(1e-9)) - self.t0
+    }
+
     /// Encodes `msg` and writes it on channel `ch`.
     fn write(&mut self, ch: u16, sequence: u32, ns: u64, msg: &impl prost::Message) -> Result<(), McapOutError> {
         put(&mut self.w, &mut self.buf, &self.tmp, ch, sequence, ns, msg)
@@ -426,11 +470,11 @@ impl<'a> TrialWriter<'a> {
     /// Writes one solved frame: `/tf`, `/markers`, `/smocap/state` and `/smocap/stats`, log time
     /// = the epoch plus the frame's time since the trial's first sample.
     pub fn frame(&mut self, fr: &SolvedFrame) -> Result<(), McapOutError> {
-        let (ctx, trial) = (self.ctx, self.trial);
+        let ctx = self.ctx;
         let model = &ctx.model;
         let f = fr.index;
-        let t = trial.times.get(f).copied().unwrap_or(f as f64 / trial.rate_hz.max(1e-9)) - self.t0;
-        let ns = self.epoch_ns + (t.max(0.0) * 1e9).round() as u64;
+        let t = self.since_start(f);
+        let ns = self.log_ns(f);
         let stamp = Some(Timestamp::from_ns(ns));
         ctx.proxy.apply(&fr.proxies, &mut self.y, &mut self.dphi);
         cpu::forward(model, &self.y, &mut self.ws);

@@ -302,3 +302,47 @@ pub struct Subject {
     #[prost(double, repeated, tag = "16")]
     pub world_from_model: Vec<f64>,
 }
+
+/// `smocap.LabelQc`: the trial's label quality control, once per trial.
+#[derive(Clone, PartialEq, prost::Message)]
+pub struct LabelQc {
+    #[prost(message, optional, tag = "1")]
+    pub timestamp: Option<Timestamp>,
+    #[prost(string, tag = "2")]
+    pub mode: String,
+    #[prost(uint32, tag = "3")]
+    pub rigid_pairs: u32,
+    #[prost(message, repeated, tag = "4")]
+    pub events: Vec<LabelEvent>,
+    #[prost(uint32, tag = "5")]
+    pub masked_frames: u32,
+    #[prost(double, tag = "6")]
+    pub masked_share: f64,
+    #[prost(string, tag = "7")]
+    pub suspect: String,
+}
+
+/// `smocap.LabelEvent`: one labelling error.
+#[derive(Clone, PartialEq, prost::Message)]
+pub struct LabelEvent {
+    #[prost(string, tag = "1")]
+    pub kind: String,
+    #[prost(string, repeated, tag = "2")]
+    pub markers: Vec<String>,
+    #[prost(uint32, tag = "3")]
+    pub first_frame: u32,
+    #[prost(uint32, tag = "4")]
+    pub last_frame: u32,
+    #[prost(message, optional, tag = "5")]
+    pub first_time: Option<Timestamp>,
+    #[prost(message, optional, tag = "6")]
+    pub last_time: Option<Timestamp>,
+    #[prost(uint32, tag = "7")]
+    pub detected_frames: u32,
+    #[prost(string, tag = "8")]
+    pub action: String,
+    #[prost(double, tag = "9")]
+    pub residual_before_mm: f64,
+    #[prost(double, tag = "10")]
+    pub residual_after_mm: f64,
+}

@@ -72,5 +72,14 @@ pub const SUBJECT: ChannelSpec = ChannelSpec {
     per_frame: false,
 };
 
+/// `/smocap/label_qc`: the trial's label quality control (swaps repaired, jumps masked), once.
+pub const LABEL_QC: ChannelSpec = ChannelSpec {
+    topic: "/smocap/label_qc",
+    schema: "smocap.LabelQc",
+    descriptors: SMOCAP_DESCRIPTORS,
+    frame: "",
+    per_frame: false,
+};
+
 /// Every channel, in channel-id order.
-pub const CHANNELS: [ChannelSpec; 6] = [STATE, STATS, TF, MARKERS, SCENE, SUBJECT];
+pub const CHANNELS: [ChannelSpec; 7] = [STATE, STATS, TF, MARKERS, SCENE, SUBJECT, LABEL_QC];

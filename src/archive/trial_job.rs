@@ -267,8 +267,9 @@ fn start_writer<'s, 'w>(
     }
     let field = |k: &str| job.run.get(k).cloned().unwrap_or_default();
     let names = TrialNames { dataset: field("dataset"), subject: field("subject"), trial: field("trial") };
-    let mut writer = TrialWriter::create(job.out, ctx, job.trial.header(), &cal.calibration, &names, opt)
-        .map_err(|e| e.to_string())?;
+    let mut writer =
+        TrialWriter::create(job.out, ctx, job.trial.header(), &cal.calibration, &names, job.trial.label_qc(), opt)
+            .map_err(|e| e.to_string())?;
     // Frames go over in batches of BATCH_FRAMES: one wake-up of the writer per batch, not
     // per frame (per-frame hand-over cost 7 % of a short trial's conversion in `perf`).
     let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<SolvedFrame>>(QUEUE_FRAMES / BATCH_FRAMES);

@@ -210,7 +210,7 @@ pub fn screen_trial(ctx: &Context, trial: &dyn TrialFrames, columns: &[Option<us
         }
     })?;
     let pairs = sampler.rigid(settings);
-    let mut scr = Screen::new(model, &used, pairs, settings.threshold_mm * 1e-3);
+    let mut scr = Screen::new(model, &used, pairs, settings.threshold_mm * 1e-3, settings.step_mm * 1e-3);
     // Pass 2: the per-frame screen, detections grouped into spans.
     let threshold = settings.threshold_mm * 1e-3;
     let mut spans = Spans::new(settings.max_gap_frames);

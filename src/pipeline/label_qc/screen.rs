@@ -32,13 +32,20 @@ pub(crate) struct Screen {
     pub(crate) previous: Vec<f64>,
     /// The previous frame as screened (exchanges applied, masks as gaps).
     last: Vec<[f64; 3]>,
+    /// Per pair: its distance (m) in the last frame where both its markers were observed and
+    /// kept (NaN before): the reference of the step test.
+    local: Vec<f64>,
+    /// A marker whose distances to its partners differ from their last kept values by more than
+    /// this (m, median over the partners) has stepped away from its body.
+    step_threshold: f64,
     scratch: Vec<f64>,
     pub(crate) findings: Findings,
 }
 
 impl Screen {
-    pub(crate) fn new(model: &Model, used: &[bool], pairs: Vec<Pair>, threshold_m: f64) -> Screen {
+    pub(crate) fn new(model: &Model, used: &[bool], pairs: Vec<Pair>, threshold_m: f64, step_m: f64) -> Screen {
         let nm = used.len();
+        let np = pairs.len();
         let mut partners = vec![Vec::new(); nm];
         for (k, p) in pairs.iter().enumerate() {
             partners[p.a].push(k);
@@ -69,6 +76,8 @@ impl Screen {
             scores: vec![0.0; nm],
             previous: vec![0.0; nm],
             last: vec![[f64::NAN; 3]; nm],
+            local: vec![f64::NAN; np],
+            step_threshold: step_m,
             scratch: Vec::with_capacity(nm),
             findings: Findings::default(),
         }
@@ -152,12 +161,14 @@ impl Screen {
         std::mem::swap(&mut self.scores, &mut self.previous);
         self.flag(x, true);
         self.touched(x);
-        if self.considered.is_empty() {
-            self.last.copy_from_slice(x);
-            return;
-        }
         let mut work = std::mem::take(&mut self.work);
         work.copy_from_slice(x);
+        if self.considered.is_empty() {
+            self.steps(&mut work);
+            self.last.copy_from_slice(&work);
+            self.work = work;
+            return;
+        }
         // Exchanges, best first, of a marker of a pair that does not fit with a candidate (its
         // left/right mirror, a marker on its body or the next): the exchange that removes the
         // most misfit from the pairs it touches (more than twice the threshold, three quarters
@@ -232,8 +243,65 @@ impl Screen {
             self.findings.masks.push((pick.0, score));
             work[pick.0] = [f64::NAN; 3];
         }
+        self.steps(&mut work);
         self.last.copy_from_slice(&work);
         self.work = work;
+    }
+
+    /// Marker `m`'s step in `x`: the median, over its partners observed now and with a kept
+    /// distance, of how far their distance is from that (0 with none).
+    fn step(&mut self, m: usize, x: &[[f64; 3]]) -> f64 {
+        if !x[m][0].is_finite() {
+            return 0.0;
+        }
+        let mut s = std::mem::take(&mut self.scratch);
+        s.clear();
+        for &k in &self.partners[m] {
+            let p = &self.pairs[k];
+            let d = distance(&x[p.a], &x[p.b]);
+            if d.is_finite() && self.local[k].is_finite() {
+                s.push((d - self.local[k]).abs());
+            }
+        }
+        // The second largest: a jump changes most of its marker's distances, a partner's jump
+        // one of them (masked first, as the larger step).
+        let out = if s.len() < 2 {
+            0.0
+        } else {
+            s.sort_unstable_by(|a, b| b.total_cmp(a));
+            s[1]
+        };
+        self.scratch = s;
+        out
+    }
+
+    /// The step test on the screened frame `work`: a marker whose distances to its partners
+    /// changed abruptly since they were last kept (a jump in any direction changes them by a
+    /// large part of its size, while the trial-wide test above needs them far from the trial's
+    /// distances beyond their spread) is masked, the largest step first; then the distances of
+    /// the pairs kept in this frame become the next frame's references.
+    fn steps(&mut self, work: &mut [[f64; 3]]) {
+        for _ in 0..6 {
+            let mut pick: Option<(usize, f64)> = None;
+            for m in 0..work.len() {
+                if self.partners[m].is_empty() {
+                    continue;
+                }
+                let s = self.step(m, work);
+                if s > self.step_threshold && pick.is_none_or(|p| s > p.1) {
+                    pick = Some((m, s));
+                }
+            }
+            let Some((m, s)) = pick else { break };
+            self.findings.masks.push((m, s));
+            work[m] = [f64::NAN; 3];
+        }
+        for (k, p) in self.pairs.iter().enumerate() {
+            let d = distance(&work[p.a], &work[p.b]);
+            if d.is_finite() {
+                self.local[k] = d;
+            }
+        }
     }
 
     /// Whether exchanging `a` and `b` in frame `x` leaves both within the threshold (true when

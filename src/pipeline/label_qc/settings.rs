@@ -17,6 +17,16 @@ pub enum QcMode {
     Repair,
 }
 
+impl QcMode {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            QcMode::Off => "off",
+            QcMode::Flag => "flag",
+            QcMode::Repair => "repair",
+        }
+    }
+}
+
 /// Label quality control: thresholds of the screen ([`super`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -28,6 +38,11 @@ pub struct LabelQcSettings {
     /// Default 30: ten times the spread of skin-marker distances on one body, a third of the
     /// smallest left/right or neighbour exchange that changes anything (heels, knees ≈ 150 mm).
     pub threshold_mm: f64,
+    /// A marker is flagged in a frame when the median, over its rigid partners, of how far their
+    /// distance is from its value in the last frame where both were kept exceeds this (mm): a
+    /// jump in any direction. Default 20: rigid distances change by a few millimetres between
+    /// frames (soft tissue), a label error by a large part of its size.
+    pub step_mm: f64,
     /// Pairs of markers on one body or on bodies one or two joints apart whose distance varies
     /// over the trial by more than this robust standard deviation (mm, 1.4826 · MAD) are not
     /// rigid and not used. Default 8.
@@ -54,6 +69,7 @@ impl Default for LabelQcSettings {
         LabelQcSettings {
             mode: QcMode::Repair,
             threshold_mm: 30.0,
+            step_mm: 40.0,
             rigid_sd_mm: 8.0,
             noise_sds: 5.0,
             max_gap_frames: 10,
