@@ -281,7 +281,8 @@ fn shared_real_trials_have_no_label_events() {
 }
 
 /// `smocap synth --seed 11` (1000 frames) with LKNE/RKNE exchanged for 200 frames, LASI/LPSI for
-/// 50 and LHEE/RHEE for 20: exit 0, the three swaps repaired and listed in the report.
+/// 50 and LHEE/RHEE for 20: exit 0, the three swaps repaired and listed in the report; a
+/// static trial's swap repaired and listed too.
 #[test]
 fn cli_repairs_and_lists_the_swaps_of_the_issue() {
     let dir = std::env::temp_dir().join(format!("smocap-label-qc-{}", std::process::id()));
@@ -326,6 +327,25 @@ fn cli_repairs_and_lists_the_swaps_of_the_issue() {
         assert_eq!((m.to_string(), *a, *b, "repaired".to_string()), g.clone());
     }
     assert!(stderr.contains("label QC: swap"), "{stderr}");
+    // A static trial is screened as the trials are: a standing trial of the synthetic archive
+    // with its knee markers exchanged for 40 frames.
+    let spec = smocap::archive::config::SyntheticSpec { subjects: 1, trials: 1, frames: 300, seed: 2 };
+    smocap::archive::synthetic::generate(&spec, &dir.join("arch")).expect("synthetic archive");
+    let mut st = smocap::io::read_markers(&dir.join("arch/subj01/static.trc")).expect("reads");
+    inject_swap(&mut st, "LKNE", "RKNE", 20, 40);
+    smocap::io::trc::write_trc(Path::new(&p("st.trc")), &st, "mm").expect("writes");
+    let walk = dir.join("arch/subj01/walk01.trc").display().to_string();
+    let out = Command::new(bin)
+        .args(["solve", &walk, "--static", &p("st.trc"), "--threads", "2", "--report-json", &p("r2.json")])
+        .output()
+        .expect("solve");
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(p("r2.json")).expect("report")).expect("json");
+    let events = r["static_label_qc"]["events"].as_array().expect("the static trial's events");
+    assert_eq!(events.len(), 1, "{events:?}");
+    assert_eq!((&events[0]["kind"], &events[0]["action"]), (&"swap".into(), &"repaired".into()), "{events:?}");
+    assert_eq!((events[0]["first_frame"].as_u64(), events[0]["last_frame"].as_u64()), (Some(20), Some(59)));
     // `convert` screens every trial the same way; `--label-qc off` leaves them as they are.
     std::fs::create_dir_all(dir.join("data/s01")).expect("data dir");
     std::fs::copy(p("w.trc"), dir.join("data/s01/w.trc")).expect("copy");

@@ -126,11 +126,11 @@ pub fn calibrate(
         // The static trial: given, or named by the Scale setup.
         let static_input = static_input.or_else(|| s.static_path.map(Input::Path));
         let load = |i: &Input| i.load(&ctx).map_err(|e| PyErr::new::<MarkerFileError, _>(message(&e)));
-        let statics = static_input.as_ref().map(load).transpose()?;
+        let mut statics = static_input.as_ref().map(load).transpose()?;
         let mut motions = trials.iter().map(load).collect::<PyResult<Vec<_>>>()?;
         // Labels screened as `smocap solve` screens them (swaps repaired, jumps masked) before
         // they inform the calibration.
-        for (n, t, _) in &mut motions {
+        for (n, t, _) in statics.iter_mut().chain(&mut motions) {
             session::screen_labels(&ctx, n, t);
         }
         let statics: Vec<(&str, &_)> = statics.iter().map(|(n, t, _)| (n.as_str(), t)).collect();

@@ -517,7 +517,7 @@ fn subject(
     if let Some(n) = crate::pipeline::subject_check::fill_from_records(&mut sub.ctx.subject, &records) {
         log(&format!("note: {}/{}: {n}", d.name, g.subject));
     }
-    let not_one_person = crate::pipeline::subject_check::inconsistencies(&records);
+    let mut not_one_person = crate::pipeline::subject_check::inconsistencies(&records);
     if !d.settings.is_empty() {
         match sub.ctx.settings.with_overrides(&d.settings) {
             Ok(s) => sub.ctx.settings = s,
@@ -534,7 +534,17 @@ fn subject(
     let window = opt.window_frames;
     let statics: Vec<(String, Box<dyn TrialFrames>)> = match &sub.static_path {
         Some(p) => match open_for(d, &sub.ctx, p, &input, window) {
-            Ok(t) => vec![(p.display().to_string(), t)],
+            Ok(t) => {
+                // Its labels were screened as the trials' are: what was found goes to the log,
+                // and a static trial the screen calls suspect makes the calibration suspect.
+                if let Some(qc) = t.label_qc() {
+                    for line in qc.lines(&p.display().to_string()) {
+                        log(&format!("{}/{}: {line}", d.name, g.subject));
+                    }
+                    not_one_person.extend(qc.suspect.iter().map(|w| format!("static trial: {w}")));
+                }
+                vec![(p.display().to_string(), t)]
+            }
             Err(e) => return ([outcomes, fail_all(format!("static trial: {e}"))].concat(), None),
         },
         None => Vec::new(),

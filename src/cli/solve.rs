@@ -195,8 +195,15 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
     let mut report = Report::new(&ctx, threads);
     let static_trial = match &static_path {
         Some(p) => {
-            let (t, conv) = read_trial(&ctx, p, &input_opt)?;
+            let (mut t, conv) = read_trial(&ctx, p, &input_opt)?;
             report.static_input = Some(conv);
+            // Its labels are screened as every trial's are: a swap in the static trial would
+            // become the subject's morphology.
+            let qc = session::screen_labels(&ctx, &p.display().to_string(), &mut t);
+            for line in qc.iter().flat_map(|q| q.lines(&p.display().to_string())) {
+                eprintln!("{line}");
+            }
+            report.static_label_qc = qc;
             Some(t)
         }
         None => None,
@@ -226,7 +233,9 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
     };
     if let Some(Ok(c)) = &mut calibrated {
         c.report.subject_from_files = subject_note;
-        c.mark_subject_suspect(not_one_person);
+        let mut why = not_one_person;
+        why.extend(report.static_label_qc.iter().flat_map(|q| q.suspect.iter()).map(|w| format!("static trial: {w}")));
+        c.mark_subject_suspect(why);
     }
     if let Some(Ok(c)) = &calibrated {
         eprintln!("{}", c.report.summary());

@@ -106,6 +106,10 @@ pub struct Report {
     /// Units and up axis of the static trial, when one was given.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub static_input: Option<InputConventions>,
+    /// The static trial's label quality control (its labels screened as every trial's are,
+    /// before they inform the calibration), when one was given and screening is on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub static_label_qc: Option<super::label_qc::LabelQc>,
     /// The subject's calibration: morphology against its priors, registration, time.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration: Option<CalibrationReport>,
@@ -219,6 +223,7 @@ impl Report {
             model: ctx.model_source.clone(),
             settings: ctx.settings.clone(),
             static_input: None,
+            static_label_qc: None,
             calibration: None,
             trials: Vec::new(),
             totals: Totals::default(),
