@@ -1,0 +1,198 @@
+//! What a conversion reports: each trial's and dataset's fate, each subject's calibration cost,
+//! the run's summary table and where the time went.
+
+use crate::pipeline::stats::P50P90;
+use serde::{Deserialize, Serialize};
+
+/// One trial's fate.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TrialOutcome {
+    pub dataset: String,
+    pub subject: String,
+    /// Path relative to the dataset root.
+    pub trial: String,
+    pub output: String,
+    /// "ok", "skipped" (already converted, `--resume`), "suspect" (converted, but see `error`:
+    /// [`crate::pipeline::verdict`]) or "failed".
+    pub status: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+    pub frames: usize,
+    pub solve_s: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ms_per_frame: Option<P50P90>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub iterations: Option<P50P90>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rmse_mm: Option<P50P90>,
+    /// The evaluation backend that solved it: `cpu`, or `wgpu: <adapter description>`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub backend: Option<String>,
+    /// Label quality control events: swaps, jumps, ghosts and what was done
+    /// ([`crate::pipeline::label_qc`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub label_qc: Vec<crate::pipeline::label_qc::LabelEvent>,
+}
+
+/// A dataset's fate (skipped ones say why: its root is absent; failed ones too: a bad glob, a
+/// synthetic dataset that could not be generated, an unreadable folder).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct DatasetNote {
+    pub name: String,
+    pub root: String,
+    pub skipped: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub failed: Option<String>,
+}
+
+/// The run: every trial found (in this shard), with its status.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ConvertSummary {
+    pub smocap_version: String,
+    /// `I/N` when sharded.
+    pub shard: Option<String>,
+    pub datasets: Vec<DatasetNote>,
+    pub trials: Vec<TrialOutcome>,
+    /// Each calibrated subject's calibration cost, in dataset and subject order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub calibrations: Vec<SubjectCalibration>,
+    /// Wall time of the conversion (s: from the trials found, synthetic datasets generated, to
+    /// the last trial written).
+    #[serde(default)]
+    pub wall_seconds: f64,
+    /// Workers of the conversion (`--jobs`).
+    #[serde(default)]
+    pub threads: usize,
+}
+
+/// What calibrating one subject cost.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct SubjectCalibration {
+    pub dataset: String,
+    pub subject: String,
+    /// Wall time (s).
+    pub seconds: f64,
+    pub stages: Vec<crate::solve::calibrate::StageCost>,
+}
+
+impl ConvertSummary {
+    /// Trials that failed or are suspect.
+    pub fn failed(&self) -> usize {
+        self.trials.iter().filter(|t| t.status == "failed" || t.status == "suspect").count()
+    }
+
+    /// Datasets that failed as a whole (no trial of theirs could be looked at).
+    pub fn failed_datasets(&self) -> usize {
+        self.datasets.iter().filter(|d| d.failed.is_some()).count()
+    }
+
+    /// Trials converted or already done (`ok` or `skipped`).
+    pub fn succeeded(&self) -> usize {
+        self.trials.iter().filter(|t| t.status == "ok" || t.status == "skipped").count()
+    }
+
+    /// One line per dataset: trials ok/skipped/failed, frames, frames/s, p50/p90 figures.
+    pub fn table(&self) -> String {
+        let mut s = format!(
+            "{:<24} {:>5} {:>7} {:>6} {:>8} {:>9} {:>14} {:>12} {:>14}\n",
+            "dataset",
+            "ok",
+            "skipped",
+            "failed",
+            "frames",
+            "frames/s",
+            "ms/frame p50/90",
+            "iter p50/90",
+            "RMSE mm p50/90"
+        );
+        for d in &self.datasets {
+            let ts: Vec<&TrialOutcome> = self.trials.iter().filter(|t| t.dataset == d.name).collect();
+            if let Some(why) = &d.failed {
+                s += &format!("{:<24} failed: {why}\n", d.name);
+                continue;
+            }
+            if let Some(why) = &d.skipped {
+                s += &format!("{:<24} skipped: {why}\n", d.name);
+                continue;
+            }
+            let count =
+                |st: &str| ts.iter().filter(|t| t.status == st || st == "failed" && t.status == "suspect").count();
+            let solved: Vec<&&TrialOutcome> = ts.iter().filter(|t| t.status == "ok").collect();
+            let frames: usize = solved.iter().map(|t| t.frames).sum();
+            let secs: f64 = solved.iter().map(|t| t.solve_s).sum();
+            let med = |f: fn(&TrialOutcome) -> Option<P50P90>| {
+                let v: Vec<P50P90> = solved.iter().filter_map(|t| f(t)).collect();
+                if v.is_empty() {
+                    return "-".to_string();
+                }
+                let p50: Vec<f64> = v.iter().map(|x| x.p50).collect();
+                let p90: Vec<f64> = v.iter().map(|x| x.p90).collect();
+                let m = |x: &[f64]| crate::pipeline::stats::percentile(x, 0.5);
+                format!("{:.2}/{:.2}", m(&p50), m(&p90))
+            };
+            s += &format!(
+                "{:<24} {:>5} {:>7} {:>6} {:>8} {:>9.0} {:>14} {:>12} {:>14}\n",
+                d.name,
+                count("ok"),
+                count("skipped"),
+                count("failed"),
+                frames,
+                if secs > 0.0 { frames as f64 / secs } else { 0.0 },
+                med(|t| t.ms_per_frame),
+                med(|t| t.iterations),
+                med(|t| t.rmse_mm),
+            );
+        }
+        s + &self.throughput()
+    }
+
+    /// Where the time went: calibration per subject (by stage), end-to-end frames/s against the
+    /// solver's capacity (frames/s per worker, summed over solved trials, times the workers).
+    pub fn throughput(&self) -> String {
+        let mut s = String::new();
+        if !self.calibrations.is_empty() {
+            let n = self.calibrations.len();
+            let total: f64 = self.calibrations.iter().map(|c| c.seconds).sum();
+            let mut names: Vec<&str> = Vec::new();
+            for c in &self.calibrations {
+                for st in &c.stages {
+                    if !names.contains(&st.stage.as_str()) {
+                        names.push(&st.stage);
+                    }
+                }
+            }
+            let per: Vec<String> = names
+                .iter()
+                .map(|name| {
+                    let stages = self.calibrations.iter().flat_map(|c| &c.stages);
+                    let t: f64 = stages.filter(|st| st.stage == *name).map(|st| st.seconds).sum();
+                    format!("{name} {:.1}", t / n as f64 * 1e3)
+                })
+                .collect();
+            let max = self.calibrations.iter().map(|c| c.seconds).fold(0.0, f64::max);
+            s += &format!(
+                "calibration: {n} subjects, {:.1} ms per subject (max {:.1}; {:.2} s in all), by stage (ms per subject): {}\n",
+                total / n as f64 * 1e3,
+                max * 1e3,
+                total,
+                per.join(", ")
+            );
+        }
+        let solved: Vec<&TrialOutcome> =
+            self.trials.iter().filter(|t| t.status == "ok" || t.status == "suspect").collect();
+        let frames: usize = solved.iter().map(|t| t.frames).sum();
+        let secs: f64 = solved.iter().map(|t| t.solve_s).sum();
+        if frames > 0 && secs > 0.0 && self.wall_seconds > 0.0 {
+            let end_to_end = frames as f64 / self.wall_seconds;
+            let capacity = frames as f64 / secs * self.threads.max(1) as f64;
+            s += &format!(
+                "throughput: {frames} frames in {:.2} s wall: {end_to_end:.0} frames/s end to end; solver {:.0} frames/s per worker × {} = {capacity:.0}; ratio {:.2}\n",
+                self.wall_seconds,
+                frames as f64 / secs,
+                self.threads.max(1),
+                end_to_end / capacity
+            );
+        }
+        s
+    }
+}
