@@ -478,13 +478,11 @@ impl JointProblem<'_> {
         let mut nu = 2.0;
         let mut iterations = 0;
         let mut rejected = 0;
-        // The cap counts kept steps with the gain-ratio rule (rejected ones are rare there; at
-        // most as many again), every step with the fixed one.
+        // The cap counts kept steps (a run of rejected ones ends when the damping passes 1e8).
         let gain_ratio = s.calibration_gain_ratio;
-        let counted = |it: u32, rej: u32| if gain_ratio { (it - rej).max(it / 2) } else { it };
         // The linearisation at the current state, kept across rejected steps.
         let mut linear: Option<Linear> = None;
-        while counted(iterations, rejected) < s.calibration_max_iterations && !self.frames.is_empty() {
+        while iterations - rejected < s.calibration_max_iterations && !self.frames.is_empty() {
             iterations += 1;
             let lin = linear.get_or_insert_with(|| self.linearize(state, (&scale, &pose), &cols, nz));
             let (mut schur, reduced, blocks) = self.eliminate(lin, lambda);
@@ -556,14 +554,6 @@ impl JointProblem<'_> {
                 }
             }
             let (e1, r1) = self.total(&next, &scale, &cols);
-            if std::env::var_os("SMOCAP_TRACE_CAL").is_some() {
-                eprintln!(
-                    "TRACE nz={nz} it={iterations} lambda={lambda:.3e} e0={energy:.9e} e1={e1:.9e} rel={:.3e} pred={predicted:.3e} dz={:.3e} rmse={:.4}",
-                    (energy - e1) / energy,
-                    dz.amax(),
-                    r1 * 1e3
-                );
-            }
             if e1 < energy {
                 let rel = (energy - e1) / energy.max(f64::MIN_POSITIVE);
                 let energy_before = energy;
@@ -583,6 +573,11 @@ impl JointProblem<'_> {
                 if rel < s.calibration_rel_tol || dz.amax() < 1e-5 {
                     break;
                 }
+            } else if predicted < s.calibration_rel_tol * energy {
+                // Rejected, and the model itself sees less to gain than the tolerance: stop here
+                // rather than damp toward a step too small to matter.
+                rejected += 1;
+                break;
             } else {
                 rejected += 1;
                 if gain_ratio {
