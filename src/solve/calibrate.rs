@@ -303,7 +303,6 @@ impl JointProblem<'_> {
         let zero_w = vec![0.0; nm];
         let model = self.model_with(&state.offsets);
         let eval = Evaluator::new(&model, self.proxy);
-        let mut ws = EvalWorkspace::new(&model, self.proxy);
         let mut c = DMatrix::<f64>::zeros(nz, nz);
         let mut neg_gz = DVector::<f64>::zeros(nz);
         {
@@ -314,102 +313,122 @@ impl JointProblem<'_> {
             }
             neg_gz -= gz;
         }
+        // Frames in pieces of [`ELIMINATION_PIECE`] in parallel, each piece with its own
+        // workspace and partial sums, added in piece order (the same bits whatever the threads).
+        use rayon::prelude::*;
+        let idx: Vec<usize> = (0..self.frames.len()).collect();
+        let pieces: Vec<(DMatrix<f64>, DVector<f64>, Vec<FrameLinear>)> = idx
+            .par_chunks(ELIMINATION_PIECE)
+            .map(|piece| {
+                let mut ws = EvalWorkspace::new(&model, self.proxy);
+                let mut c = DMatrix::<f64>::zeros(nz, nz);
+                let mut neg_gz = DVector::<f64>::zeros(nz);
+                let mut frames = Vec::with_capacity(piece.len());
+                for &k in piece {
+                    let (obs, p, mw) = (self.frames[k], &state.poses[k], self.weights[k]);
+                    // Coordinate targets alone (marker weights 0) give the tracking part of H and g.
+                    let tp = FrameProblem {
+                        observed: obs,
+                        marker_weights: &zero_w,
+                        tracking_ref: self.tracking_refs[k],
+                        tracking_weights: self.tracking_weights[k],
+                    };
+                    eval.linearize(p, &tp, &mut ws);
+                    let mut a = ws.gn.h.select_rows(pose).select_columns(pose);
+                    let mut gq = ws.gn.g.select_rows(pose);
+                    let fp = FrameProblem { marker_weights: mw, ..tp };
+                    eval.energy(p, &fp, &mut ws);
+                    cpu::jacobian(&model, &eval.layout, &mut ws.kin);
+                    let jm = eval.marker_jacobian(&ws);
+                    // Rows of observed, weighted markers, scaled by √w.
+                    let rows: Vec<usize> =
+                        (0..nm).filter(|&m| mw[m] > 0.0 && obs[3 * m..3 * m + 3].iter().all(|v| !v.is_nan())).collect();
+                    let nr = 3 * rows.len();
+                    let mut jq = DMatrix::zeros(nr, nq);
+                    let mut js = DMatrix::zeros(nr, ns);
+                    let mut r = DVector::zeros(nr);
+                    for (i, &m) in rows.iter().enumerate() {
+                        let sw = mw[m].sqrt();
+                        for a in 0..3 {
+                            let row = 3 * m + a;
+                            r[3 * i + a] = sw * (ws.kin.markers[row] - obs[row]);
+                            for (c, &k) in pose.iter().enumerate() {
+                                jq[(3 * i + a, c)] = sw * jm[(row, k)];
+                            }
+                            for (c, &k) in scale.iter().enumerate() {
+                                js[(3 * i + a, c)] = sw * jm[(row, k)];
+                            }
+                        }
+                    }
+                    fixed::add_t_mul_sym_tiled(&mut a, 1.0, &jq);
+                    gq += fixed::t_mul_v(&jq, &r);
+                    // Scale part.
+                    let g_s = fixed::t_mul_v(&js, &r);
+                    let mut b = DMatrix::zeros(nq, nz);
+                    fixed::add_t_mul(&mut b, (0, 0), 1.0, &jq, &js);
+                    fixed::add_t_mul_sym(&mut c, 0, 1.0, &js);
+                    neg_gz.rows_mut(0, ns).sub_assign(&g_s);
+                    // Offset parts: marker m's rows depend on its own offset through R_b diag(s_b), a
+                    // 3 × 3 block per marker: `B`'s columns `jq_mᵀ J_o`, and on the diagonal of `C`.
+                    for (i, &m) in rows.iter().enumerate() {
+                        let Some(col) = cols[m] else { continue };
+                        let bdy = model.markers[m].body;
+                        let sb = Vector3::new(
+                            ws.y[model.scale_index(bdy, 0)],
+                            ws.y[model.scale_index(bdy, 1)],
+                            ws.y[model.scale_index(bdy, 2)],
+                        );
+                        let sw = mw[m].sqrt();
+                        let jo: Matrix3<f64> = ws.kin.body_rot[bdy] * Matrix3::from_diagonal(&sb) * sw;
+                        for q in 0..nq {
+                            let jr = Vector3::new(jq[(3 * i, q)], jq[(3 * i + 1, q)], jq[(3 * i + 2, q)]);
+                            let v = jo.tr_mul(&jr);
+                            for a in 0..3 {
+                                b[(q, col + a)] = v[a];
+                            }
+                        }
+                        for sc in 0..ns {
+                            let jr = Vector3::new(js[(3 * i, sc)], js[(3 * i + 1, sc)], js[(3 * i + 2, sc)]);
+                            let v = jo.tr_mul(&jr);
+                            for a in 0..3 {
+                                c[(sc, col + a)] += v[a];
+                                c[(col + a, sc)] += v[a];
+                            }
+                        }
+                        let joo = jo.tr_mul(&jo);
+                        let r_m = Vector3::new(r[3 * i], r[3 * i + 1], r[3 * i + 2]);
+                        let g_o = jo.tr_mul(&r_m);
+                        for a in 0..3 {
+                            for bb in 0..3 {
+                                c[(col + a, col + bb)] += joo[(a, bb)];
+                            }
+                            neg_gz[col + a] -= g_o[a];
+                        }
+                    }
+                    // Poses at an end of their range that the gradient pushes beyond it stay there: the
+                    // step would be clipped, and the rest of the frame's step, computed as if it were
+                    // not, would then not be the model's minimiser (steps rejected one after another).
+                    for (i, &k) in pose.iter().enumerate() {
+                        let (lo, hi) = self.proxy.proxies[k].range;
+                        let tol = 1e-9 * (hi - lo).abs().max(1.0);
+                        if (p[k] <= lo + tol && gq[i] > 0.0) || (p[k] >= hi - tol && gq[i] < 0.0) {
+                            a.row_mut(i).fill(0.0);
+                            a.column_mut(i).fill(0.0);
+                            a[(i, i)] = 1.0;
+                            gq[i] = 0.0;
+                            b.row_mut(i).fill(0.0);
+                        }
+                    }
+                    frames.push(FrameLinear { a, gq, b });
+                }
+                (c, neg_gz, frames)
+            })
+            .collect();
         let mut frames = Vec::with_capacity(self.frames.len());
-        for (k, ((obs, p), mw)) in self.frames.iter().zip(&state.poses).zip(self.weights).enumerate() {
-            // Coordinate targets alone (marker weights 0) give the tracking part of H and g.
-            let tp = FrameProblem {
-                observed: obs,
-                marker_weights: &zero_w,
-                tracking_ref: self.tracking_refs[k],
-                tracking_weights: self.tracking_weights[k],
-            };
-            eval.linearize(p, &tp, &mut ws);
-            let mut a = ws.gn.h.select_rows(pose).select_columns(pose);
-            let mut gq = ws.gn.g.select_rows(pose);
-            let fp = FrameProblem { marker_weights: mw, ..tp };
-            eval.energy(p, &fp, &mut ws);
-            cpu::jacobian(&model, &eval.layout, &mut ws.kin);
-            let jm = eval.marker_jacobian(&ws);
-            // Rows of observed, weighted markers, scaled by √w.
-            let rows: Vec<usize> =
-                (0..nm).filter(|&m| mw[m] > 0.0 && obs[3 * m..3 * m + 3].iter().all(|v| !v.is_nan())).collect();
-            let nr = 3 * rows.len();
-            let mut jq = DMatrix::zeros(nr, nq);
-            let mut js = DMatrix::zeros(nr, ns);
-            let mut r = DVector::zeros(nr);
-            for (i, &m) in rows.iter().enumerate() {
-                let sw = mw[m].sqrt();
-                for a in 0..3 {
-                    let row = 3 * m + a;
-                    r[3 * i + a] = sw * (ws.kin.markers[row] - obs[row]);
-                    for (c, &k) in pose.iter().enumerate() {
-                        jq[(3 * i + a, c)] = sw * jm[(row, k)];
-                    }
-                    for (c, &k) in scale.iter().enumerate() {
-                        js[(3 * i + a, c)] = sw * jm[(row, k)];
-                    }
-                }
-            }
-            fixed::add_t_mul_sym(&mut a, 0, 1.0, &jq);
-            gq += fixed::t_mul_v(&jq, &r);
-            // Scale part.
-            let g_s = fixed::t_mul_v(&js, &r);
-            let mut b = DMatrix::zeros(nq, nz);
-            fixed::add_t_mul(&mut b, (0, 0), 1.0, &jq, &js);
-            fixed::add_t_mul_sym(&mut c, 0, 1.0, &js);
-            neg_gz.rows_mut(0, ns).sub_assign(&g_s);
-            // Offset parts: marker m's rows depend on its own offset through R_b diag(s_b), a
-            // 3 × 3 block per marker: `B`'s columns `jq_mᵀ J_o`, and on the diagonal of `C`.
-            for (i, &m) in rows.iter().enumerate() {
-                let Some(col) = cols[m] else { continue };
-                let bdy = model.markers[m].body;
-                let sb = Vector3::new(
-                    ws.y[model.scale_index(bdy, 0)],
-                    ws.y[model.scale_index(bdy, 1)],
-                    ws.y[model.scale_index(bdy, 2)],
-                );
-                let sw = mw[m].sqrt();
-                let jo: Matrix3<f64> = ws.kin.body_rot[bdy] * Matrix3::from_diagonal(&sb) * sw;
-                for q in 0..nq {
-                    let jr = Vector3::new(jq[(3 * i, q)], jq[(3 * i + 1, q)], jq[(3 * i + 2, q)]);
-                    let v = jo.tr_mul(&jr);
-                    for a in 0..3 {
-                        b[(q, col + a)] = v[a];
-                    }
-                }
-                for sc in 0..ns {
-                    let jr = Vector3::new(js[(3 * i, sc)], js[(3 * i + 1, sc)], js[(3 * i + 2, sc)]);
-                    let v = jo.tr_mul(&jr);
-                    for a in 0..3 {
-                        c[(sc, col + a)] += v[a];
-                        c[(col + a, sc)] += v[a];
-                    }
-                }
-                let joo = jo.tr_mul(&jo);
-                let r_m = Vector3::new(r[3 * i], r[3 * i + 1], r[3 * i + 2]);
-                let g_o = jo.tr_mul(&r_m);
-                for a in 0..3 {
-                    for bb in 0..3 {
-                        c[(col + a, col + bb)] += joo[(a, bb)];
-                    }
-                    neg_gz[col + a] -= g_o[a];
-                }
-            }
-            // Poses at an end of their range that the gradient pushes beyond it stay there: the
-            // step would be clipped, and the rest of the frame's step, computed as if it were
-            // not, would then not be the model's minimiser (steps rejected one after another).
-            for (i, &k) in pose.iter().enumerate() {
-                let (lo, hi) = self.proxy.proxies[k].range;
-                let tol = 1e-9 * (hi - lo).abs().max(1.0);
-                if (p[k] <= lo + tol && gq[i] > 0.0) || (p[k] >= hi - tol && gq[i] < 0.0) {
-                    a.row_mut(i).fill(0.0);
-                    a.column_mut(i).fill(0.0);
-                    a[(i, i)] = 1.0;
-                    gq[i] = 0.0;
-                    b.row_mut(i).fill(0.0);
-                }
-            }
-            frames.push(FrameLinear { a, gq, b });
+        for (pc, pg, pf) in pieces {
+            c += pc;
+            neg_gz += pg;
+            frames.extend(pf);
         }
         Linear { c, neg_gz, frames }
     }

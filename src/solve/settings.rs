@@ -127,7 +127,7 @@ pub struct SolverSettings {
     /// Time between the frames tracked (pose only, each warm-started from the one before) from a
     /// trial's first usable frame to its calibration frames, so that each calibration frame
     /// starts in the motion's basin (s). Every frame at or below `1 / rate`; calibration frames are
-    /// always tracked. Default 0.05 (every fifth frame at 100 Hz, every third at 60 Hz; 0 tracks
+    /// always tracked. Default 0.1 (every tenth frame at 100 Hz, every sixth at 60 Hz; 0 tracks
     /// every frame, as before; what it changes: docs/CALIBRATION.md, "Cost").
     pub calibration_track_step_s: f64,
     /// Marker registration: calibration estimates every marker's body-frame offset together with
@@ -223,7 +223,7 @@ impl Default for SolverSettings {
             presolve: Presolve::default(),
             presolve_sweeps: 2,
             calibration_frames_motion: 96,
-            calibration_track_step_s: 0.05,
+            calibration_track_step_s: 0.1,
             registration: true,
             registration_anatomical_sd_m: 0.004,
             registration_tracking_sd_m: 0.1,
