@@ -227,6 +227,9 @@ struct Linear {
     frames: Vec<FrameLinear>,
 }
 
+/// The reduced system `S`, `Σ_k Uᵀw` and each frame's blocks ([`JointProblem::eliminate`]).
+type Eliminated = (DMatrix<f64>, DVector<f64>, Vec<Option<FrameBlocks>>);
+
 /// Frames per piece of the parallel elimination. Fixed, so that the pieces' partial sums (added
 /// in piece order) and hence every bit of the result do not depend on the thread count.
 const ELIMINATION_PIECE: usize = 8;
@@ -437,11 +440,11 @@ impl JointProblem<'_> {
     /// `S = C − Σ_k UᵀU` (undamped in `z`), `Σ_k Uᵀw`, and each frame's blocks (`None` where its
     /// damped pose block is not positive definite). Frames are eliminated in pieces of
     /// [`ELIMINATION_PIECE`] in parallel, the pieces' sums added in order.
-    fn eliminate(&self, lin: &Linear, lambda: f64) -> (DMatrix<f64>, DVector<f64>, Vec<Option<FrameBlocks>>) {
+    fn eliminate(&self, lin: &Linear, lambda: f64) -> Eliminated {
         use rayon::prelude::*;
         let nz = lin.c.nrows();
         let floor = self.settings.damping_floor;
-        let pieces: Vec<(DMatrix<f64>, DVector<f64>, Vec<Option<FrameBlocks>>)> = lin
+        let pieces: Vec<Eliminated> = lin
             .frames
             .par_chunks(ELIMINATION_PIECE)
             .map(|piece| {
