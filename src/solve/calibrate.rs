@@ -595,9 +595,10 @@ impl JointProblem<'_> {
                 if rel < s.calibration_rel_tol || dz.amax() < 1e-5 {
                     break;
                 }
-            } else if predicted < s.calibration_rel_tol * energy {
-                // Rejected, and the model itself sees less to gain than the tolerance: stop here
-                // rather than damp toward a step too small to matter.
+            } else if predicted < s.calibration_rel_tol * energy || dz.amax() < 1e-4 {
+                // Rejected, and the model itself sees less to gain than the tolerance, or the step
+                // moves no scale factor or offset by 1e-4 (0.1 mm on a metre, below any marker
+                // noise): stop here rather than damp toward a step too small to matter.
                 rejected += 1;
                 break;
             } else {
