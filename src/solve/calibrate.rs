@@ -9,8 +9,16 @@
 //! ```
 //! (`A_k`, `C` damped Levenberg–Marquardt style). The scale step solves that reduced quadratic
 //! as a QP under the scale ranges and the profile's constraints on scale proxies (e.g. left/right
-//! symmetry); the poses follow by back-substitution, clipped to their ranges. A step is accepted
-//! when the total objective decreases. A weak prior pulls unobservable scales toward 1.
+//! symmetry); the poses follow by back-substitution, clipped to their ranges (a pose at an end of
+//! its range that the gradient pushes beyond is held for the step). A step is accepted when the
+//! total objective decreases; a stage stops on the objective's relative progress
+//! (`calibration_rel_tol`). A weak prior pulls unobservable scales toward 1.
+//!
+//! Cost: eliminating the poses leaves a dense system over `z` (scales and offsets, `nz` ≈ 175),
+//! where eliminating the offsets (3 × 3 blocks) would leave one over every frame's pose; it is
+//! formed from each frame's `UᵀU` (`fixed::add_t_mul_sym_tiled`), frames linearised and
+//! eliminated in parallel in fixed pieces, the linearisation kept across rejected steps
+//! (docs/CALIBRATION.md, "Which unknowns to eliminate").
 
 use super::fixed;
 use super::init::multi_start;
