@@ -268,6 +268,32 @@ fn registration_recovers_misplaced_tracking_markers_within_5_mm() {
     }
 }
 
+#[test]
+fn calibration_stages_converge_in_a_few_steps_well_before_the_cap() {
+    // A synthetic walk of the shipped model: each joint stage stops on its relative progress
+    // long before the cap on kept steps (before poses at an end of their range were held,
+    // clipped steps were rejected one after another and the stages ran to the cap). A rejected
+    // step at convergence (the model predicts ~1e-5 of the objective to gain, the step moves the
+    // scales by < 1e-4) ends the stage: 2 kept + 1 rejected in the scale stage here, 2 + 0
+    // registering.
+    let ctx = Context::shipped().expect("shipped");
+    let opt = SynthOptions { frames: 400, seed: 5, noise_m: 0.001, ..SynthOptions::default() };
+    let s = synthesize(&ctx.model, &ctx.proxy, &opt);
+    let cal = calibrate_subject(&ctx, &[("walk", &s.trial)]).expect("calibrates");
+    let cap = ctx.settings.calibration_max_iterations;
+    let joint: Vec<_> = cal
+        .stages
+        .iter()
+        .filter(|c| ["scales", "scales_reweighed", "registration"].contains(&c.stage.as_str()))
+        .collect();
+    assert!(!joint.is_empty(), "no joint stage in {:?}", cal.stages);
+    for c in joint {
+        eprintln!("{}: {} kept, {} rejected, {:.1} ms", c.stage, c.iterations, c.rejected, c.seconds * 1e3);
+        assert!(c.iterations <= cap / 5, "{}: {} kept steps (cap {cap})", c.stage, c.iterations);
+        assert!(c.rejected <= 3, "{}: {} rejected steps", c.stage, c.rejected);
+    }
+}
+
 /// CMU's names for the Plug-in Gait markers the shipped model has.
 const CMU: &[(&str, &str)] = &[
     ("LASI", "LFWT"),
