@@ -254,25 +254,22 @@ impl Screen {
         if !x[m][0].is_finite() {
             return 0.0;
         }
-        let mut s = std::mem::take(&mut self.scratch);
-        s.clear();
-        for &k in &self.partners[m] {
-            let p = &self.pairs[k];
-            let d = distance(&x[p.a], &x[p.b]);
-            if d.is_finite() && self.local[k].is_finite() {
-                s.push((d - self.local[k]).abs());
-            }
-        }
         // The second largest: a jump changes most of its marker's distances, a partner's jump
         // one of them (masked first, as the larger step).
-        let out = if s.len() < 2 {
-            0.0
-        } else {
-            s.sort_unstable_by(|a, b| b.total_cmp(a));
-            s[1]
-        };
-        self.scratch = s;
-        out
+        let (mut first, mut second) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
+        for &k in &self.partners[m] {
+            let p = &self.pairs[k];
+            let c = (distance(&x[p.a], &x[p.b]) - self.local[k]).abs();
+            if !c.is_finite() {
+                continue;
+            }
+            if c > first {
+                (first, second) = (c, first);
+            } else if c > second {
+                second = c;
+            }
+        }
+        second.max(0.0)
     }
 
     /// The step test on the screened frame `work`: a marker whose distances to its partners
