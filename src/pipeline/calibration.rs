@@ -26,6 +26,7 @@ use crate::solve::prior::{
     measure, Anisotropy, Anthropometric, GlobalTerm, LandmarkAnchor, OffsetPrior, PriorReport, ScaleReport,
     ScaleToward, StaticPosture,
 };
+use crate::solve::FunctionalHips;
 use crate::solve::{make_qp, Calibration, FrameSolver};
 use nalgebra::{DVector, Vector3};
 
@@ -202,7 +203,46 @@ enum Kind {
 /// morphology that fits both (`calibration_frames` from the static trials with their weights,
 /// `calibration_frames_motion` spread over the motion trials with the motion weights). Marker
 /// placement (OpenSim's MarkerPlacer) places on the static frames when there are any.
+///
+/// With `functional_hips = "apply"` and registration, the hips whose functional centres are well
+/// determined ([`super::joint_centres::hip_moves`]) move there and the subject is calibrated again
+/// with them (every stage: the frames' poses, scales and registered offsets all depend on where
+/// the hips are); the calibration says where they moved (`joint_moves`), and the subject's model
+/// ([`Context::pinned_to`]) has them there.
 pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
+    ctx: &Context,
+    statics: &[(&str, &T)],
+    motions: &[(&str, &T)],
+) -> Result<Calibration, TrialError> {
+    let started = std::time::Instant::now();
+    let s = &ctx.settings;
+    let first = calibrate_pass(ctx, statics, motions)?;
+    if s.functional_hips != FunctionalHips::Apply || !s.registration || s.marker_placement {
+        return Ok(first);
+    }
+    let mut moves = super::joint_centres::hip_moves(
+        &ctx.model,
+        &ctx.proxy,
+        &first.proxies,
+        &first.functional_centres,
+        s.functional_hips_symmetric,
+    );
+    if moves.is_empty() {
+        return Ok(first);
+    }
+    let moved = ctx.with_joint_moves(&moves);
+    let mut cal = calibrate_pass(&moved, statics, motions)?;
+    for mv in &mut moves {
+        mv.residual_mm = cal.functional_centres.iter().find(|c| c.body == mv.body).map(|c| c.distance_mm);
+    }
+    cal.joint_moves = moves;
+    let mut stages = first.stages;
+    stages.extend(cal.stages.into_iter().map(|st| StageCost { stage: format!("hips_moved:{}", st.stage), ..st }));
+    Ok(Calibration { stages, seconds: started.elapsed().as_secs_f64(), ..cal })
+}
+
+/// One calibration of the subject on `ctx`'s model (see [`calibrate_subject_with`]).
+fn calibrate_pass<T: TrialFrames + ?Sized>(
     ctx: &Context,
     statics: &[(&str, &T)],
     motions: &[(&str, &T)],
@@ -440,8 +480,10 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     cal.static_frames = kinds.iter().filter(|k| **k == Kind::Static).count();
     cal.posture = super::plausibility::static_posture(ctx, &cal.frame_proxies[..cal.static_frames]);
     cal.registration_report = registration_report(ctx, &cal);
-    cal.functional_centres =
-        super::joint_centres::functional_centres(&ctx.model, &ctx.proxy, &slices, &cal.frame_proxies);
+    if settings.functional_hips != FunctionalHips::Off {
+        cal.functional_centres =
+            super::joint_centres::functional_centres(&ctx.model, &ctx.proxy, &slices, &cal.frame_proxies);
+    }
     // How each motion trial's calibration frames fit the calibrated subject, against its siblings.
     let mut model = ctx.model.clone();
     if let Some(o) = &cal.marker_offsets {

@@ -5,11 +5,16 @@
 //! at the calibrated scales. The joint calibration already places the hips where the markers turn
 //! about them; a functional centre far from the model's says that the model cannot (a pelvis
 //! scaled wrongly, a mislabelled thigh marker) and is reported.
+//!
+//! With `functional_hips = "apply"` ([`hip_moves`]), a well-determined fit moves the subject's
+//! hip joint there: the joint's location in the pelvis frame (its parent offset, which scales
+//! with the pelvis) gains the offset divided by the pelvis's scale factors, so that at the
+//! calibrated scales the joint lies on the functional centre.
 
 use crate::kinematics::cpu::{forward, Workspace};
 use crate::model::proxy::ProxyMap;
 use crate::model::Model;
-use crate::solve::prior::FunctionalCentre;
+use crate::solve::prior::{FunctionalCentre, JointMove};
 use nalgebra::{DMatrix, DVector, Vector3};
 
 /// Below this range of motion of the child relative to the root (deg), a sphere fit is not
@@ -17,6 +22,14 @@ use nalgebra::{DMatrix, DVector, Vector3};
 pub const MIN_ROM_DEG: f64 = 20.0;
 /// A functional centre further than this from the model's (mm) is a warning.
 pub const WARN_MM: f64 = 30.0;
+/// `functional_hips = "apply"` moves a hip only to a centre at most this far from the model's
+/// (mm): hip centres of regression methods and functional ones differ by 10–20 mm (Davis against
+/// a sphere fit); beyond 30 mm the fit, not the model, is the likelier culprit (a thigh marker
+/// that slid, too little motion in one plane) and it is reported, not applied.
+pub const APPLY_MAX_MM: f64 = 30.0;
+/// Fewest marker positions a fit needs before `apply` trusts it (three thigh markers in 34
+/// frames).
+pub const APPLY_MIN_SAMPLES: usize = 100;
 
 /// The functional centres of the root body's joints over `frames` (observed markers per frame,
 /// `3·marker + axis`, NaN gaps) at the proxies `poses` of each frame.
@@ -47,7 +60,7 @@ pub fn functional_centres(
         forward(model, &y, &mut ws);
         let (r, t) = (ws.body_rot[root], ws.body_pos[root]);
         for (i, &c) in children.iter().enumerate() {
-            model_centre[i].get_or_insert_with(|| r.transpose() * (ws.body_pos[c] - t));
+            model_centre[i].get_or_insert_with(|| r.transpose() * (joint_centre(model, &y, &ws, c) - t));
             orientations[i].push(r.transpose() * ws.body_rot[c]);
             for m in (0..model.markers.len()).filter(|&m| model.markers[m].body == c) {
                 let x = Vector3::new(obs[3 * m], obs[3 * m + 1], obs[3 * m + 2]);
@@ -71,6 +84,84 @@ pub fn functional_centres(
         });
     }
     out
+}
+
+/// Where body `c`'s joint turns it (world frame): its origin plus its child offset, at the last
+/// [`forward`]'s state `y`.
+fn joint_centre(model: &Model, y: &[f64], ws: &Workspace, c: usize) -> Vector3<f64> {
+    let s = Vector3::from_fn(|a, _| y[model.scale_index(c, a)]);
+    ws.body_pos[c] + ws.body_rot[c] * s.component_mul(&model.bodies[c].joint.child_offset.translation.vector)
+}
+
+/// The hip moves that `functional_hips = "apply"` makes from `centres` (found on `model` at the
+/// calibrated `proxies`). A centre counts when it is fitted over at least [`MIN_ROM_DEG`] of
+/// motion from at least [`APPLY_MIN_SAMPLES`] marker positions. With `symmetric` and both hips
+/// counted, each hip moves by the mean of its own offset and the other's mirrored across the
+/// pelvis's mid-plane (the plane halfway between the model's hip centres): an error of the
+/// pelvis's solved orientation (a list or a turn of a degree or two) shifts the two fits in
+/// opposite directions, so only their symmetric part is the subject's. A move further than
+/// [`APPLY_MAX_MM`] is not made. `residual_mm` is left for the caller to fill.
+pub fn hip_moves(
+    model: &Model,
+    proxy: &ProxyMap,
+    proxies: &[f64],
+    centres: &[FunctionalCentre],
+    symmetric: bool,
+) -> Vec<JointMove> {
+    let y = proxy.state(proxies);
+    let counted: Vec<(usize, Vector3<f64>)> = centres
+        .iter()
+        .filter(|c| c.range_of_motion_deg >= MIN_ROM_DEG && c.samples >= APPLY_MIN_SAMPLES)
+        .filter(|c| c.offset_mm.iter().all(|v| v.is_finite()))
+        .filter_map(|c| Some((model.body_index(&c.body)?, Vector3::from(c.offset_mm) * 1e-3)))
+        .filter(|(b, _)| model.bodies[*b].parent.is_some())
+        .collect();
+    // Each hip's location in the parent's frame at the calibrated scales.
+    let parent_scale = |b: usize| {
+        let p = model.bodies[b].parent.unwrap_or(b);
+        Vector3::from_fn(|a, _| y[model.scale_index(p, a)])
+    };
+    let at_scale = |b: usize| parent_scale(b).component_mul(&model.bodies[b].joint.parent_offset.translation.vector);
+    let offsets: Vec<(usize, Vector3<f64>)> = match counted.as_slice() {
+        [(a, da), (b, db)] if symmetric => {
+            let u = (at_scale(*a) - at_scale(*b)).try_normalize(1e-9);
+            match u {
+                Some(u) => {
+                    let mirror = |v: &Vector3<f64>| v - 2.0 * v.dot(&u) * u;
+                    let sa = (da + mirror(db)) / 2.0;
+                    vec![(*a, sa), (*b, mirror(&sa))]
+                }
+                None => counted.clone(),
+            }
+        }
+        _ => counted.clone(),
+    };
+    offsets
+        .into_iter()
+        .filter(|(_, d)| d.norm() * 1e3 <= APPLY_MAX_MM)
+        .map(|(b, d)| {
+            let joint = &model.bodies[b].joint;
+            let location = joint.parent_offset.translation.vector + d.component_div(&parent_scale(b));
+            JointMove {
+                body: model.bodies[b].name.clone(),
+                joint: joint.name.clone(),
+                location_m: location.into(),
+                moved_mm: (d * 1e3).into(),
+                residual_mm: None,
+            }
+        })
+        .collect()
+}
+
+/// `model` with the joints of `moves` at their new locations.
+pub fn with_joint_moves(model: &Model, moves: &[JointMove]) -> Model {
+    let mut m = model.clone();
+    for mv in moves {
+        if let Some(b) = m.body_index(&mv.body) {
+            m.bodies[b].joint.parent_offset.translation.vector = Vector3::from(mv.location_m);
+        }
+    }
+    m
 }
 
 /// The largest rotation between any orientation and their first (deg).

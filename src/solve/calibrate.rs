@@ -66,6 +66,10 @@ pub struct Calibration {
     /// The root's joints (the hips) found from the motion against the calibrated model's.
     #[serde(default)]
     pub functional_centres: Vec<super::prior::FunctionalCentre>,
+    /// The hip joints moved to their functional centres (`functional_hips = "apply"`); the
+    /// subject's model ([`crate::pipeline::Context::pinned_to`]) has them there.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub joint_moves: Vec<super::prior::JointMove>,
     /// Motion trials whose calibration frames the calibrated subject fits far worse than their
     /// siblings' (`pipeline::subject_check::misfits`): another person's trial, or markers placed
     /// differently. Makes the calibration suspect.
@@ -598,6 +602,7 @@ pub fn finish(
         posture: Default::default(),
         registration_report: Default::default(),
         functional_centres: Vec::new(),
+        joint_moves: Vec::new(),
         trial_misfits: Vec::new(),
         stages: Vec::new(),
     }
