@@ -220,24 +220,52 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     if s.functional_hips != FunctionalHips::Apply || !s.registration || s.marker_placement {
         return Ok(first);
     }
-    let mut moves = super::joint_centres::hip_moves(
-        &ctx.model,
-        &ctx.proxy,
-        &first.proxies,
-        &first.functional_centres,
-        s.functional_hips_symmetric,
-    );
-    if moves.is_empty() {
-        return Ok(first);
+    // A fixed point: the hips move until the functional centres the calibrated subject's
+    // landmarks give agree with them (each pass sees only part of the remaining offset, as the
+    // poses partly absorb a misplaced hip).
+    let mut stages = first.stages.clone();
+    let mut moved = ctx.clone();
+    let mut cal = first.clone();
+    let mut moves: Vec<crate::solve::prior::JointMove> = Vec::new();
+    for pass in 1..=super::joint_centres::APPLY_MAX_PASSES {
+        let step = super::joint_centres::hip_moves(
+            &moved.model,
+            &moved.proxy,
+            &cal.proxies,
+            &cal.landmark_centres,
+            s.functional_hips_symmetric,
+        );
+        let largest = step.iter().map(|m| Vector3::from(m.moved_mm).norm()).fold(0.0, f64::max);
+        if step.is_empty() || largest < super::joint_centres::APPLY_TOL_MM {
+            break;
+        }
+        for m in step {
+            match moves.iter_mut().find(|k| k.body == m.body) {
+                Some(k) => k.location_m = m.location_m,
+                None => moves.push(m),
+            }
+        }
+        moved = ctx.with_joint_moves(&moves);
+        cal = calibrate_pass(&moved, statics, motions)?;
+        stages
+            .extend(cal.stages.iter().map(|st| StageCost { stage: format!("hips_{pass}:{}", st.stage), ..st.clone() }));
     }
-    let moved = ctx.with_joint_moves(&moves);
-    let mut cal = calibrate_pass(&moved, statics, motions)?;
+    // The total moves at the subject's scale; beyond the plausible bound the fits are not
+    // taken (the first calibration stands).
+    let y = ctx.proxy.state(&cal.proxies);
     for mv in &mut moves {
-        mv.residual_mm = cal.functional_centres.iter().find(|c| c.body == mv.body).map(|c| c.distance_mm);
+        let Some(b) = ctx.model.body_index(&mv.body) else { continue };
+        let p = ctx.model.bodies[b].parent.unwrap_or(b);
+        let scale = Vector3::from_fn(|a, _| y[ctx.model.scale_index(p, a)]);
+        let d = (Vector3::from(mv.location_m) - ctx.model.bodies[b].joint.parent_offset.translation.vector)
+            .component_mul(&scale);
+        mv.moved_mm = (d * 1e3).into();
+        mv.residual_mm = cal.landmark_centres.iter().find(|c| c.body == mv.body).map(|c| c.distance_mm);
+    }
+    if moves.is_empty() || moves.iter().any(|m| Vector3::from(m.moved_mm).norm() > super::joint_centres::APPLY_MAX_MM) {
+        return Ok(Calibration { stages, seconds: started.elapsed().as_secs_f64(), ..first });
     }
     cal.joint_moves = moves;
-    let mut stages = first.stages;
-    stages.extend(cal.stages.into_iter().map(|st| StageCost { stage: format!("hips_moved:{}", st.stage), ..st }));
     Ok(Calibration { stages, seconds: started.elapsed().as_secs_f64(), ..cal })
 }
 
@@ -441,6 +469,13 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
     };
     let place_frames: Vec<&[f64]> = place_on.iter().map(|&i| slices[i]).collect();
     let place_poses: Vec<Vec<f64>> = place_on.iter().map(|&i| state.poses[i].clone()).collect();
+    // The hips' functional centres in the pelvis frame the landmarks give at the model's
+    // offsets, before registration can move the pelvis's markers to absorb a misplaced hip.
+    let landmark_centres = if settings.functional_hips == FunctionalHips::Apply {
+        super::joint_centres::functional_centres(&ctx.model, &ctx.proxy, &slices, &state.poses)
+    } else {
+        Vec::new()
+    };
     // Markers some calibration frame observes with a weight: those registration can move.
     let seen: Vec<bool> = (0..nm)
         .map(|m| slices.iter().zip(&w_all).any(|(f, w)| w[m] > 0.0 && f[3 * m..3 * m + 3].iter().all(|v| !v.is_nan())))
@@ -480,6 +515,7 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
     cal.static_frames = kinds.iter().filter(|k| **k == Kind::Static).count();
     cal.posture = super::plausibility::static_posture(ctx, &cal.frame_proxies[..cal.static_frames]);
     cal.registration_report = registration_report(ctx, &cal);
+    cal.landmark_centres = landmark_centres;
     if settings.functional_hips != FunctionalHips::Off {
         cal.functional_centres =
             super::joint_centres::functional_centres(&ctx.model, &ctx.proxy, &slices, &cal.frame_proxies);

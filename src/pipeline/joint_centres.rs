@@ -27,6 +27,10 @@ pub const WARN_MM: f64 = 30.0;
 /// a sphere fit); beyond 30 mm the fit, not the model, is the likelier culprit (a thigh marker
 /// that slid, too little motion in one plane) and it is reported, not applied.
 pub const APPLY_MAX_MM: f64 = 30.0;
+/// Most calibration passes `apply` makes while moving the hips toward their fixed point.
+pub const APPLY_MAX_PASSES: usize = 4;
+/// `apply` stops moving the hips when a pass would move neither by more than this (mm).
+pub const APPLY_TOL_MM: f64 = 1.0;
 /// Fewest marker positions a fit needs before `apply` trusts it (three thigh markers in 34
 /// frames).
 pub const APPLY_MIN_SAMPLES: usize = 100;
