@@ -53,6 +53,17 @@ fn print_hips(what: &str, cal: &smocap::solve::Calibration) {
             c.body, o[0], o[1], o[2], c.range_of_motion_deg, c.samples
         );
     }
+    for c in &cal.landmark_centres {
+        let o = c.offset_mm;
+        eprintln!(
+            "{what}: before registration, functional centre of {} {:+.1} {:+.1} {:+.1} mm",
+            c.body, o[0], o[1], o[2]
+        );
+    }
+    let passes = cal.stages.iter().filter(|s| s.stage.ends_with(":registration")).count();
+    if passes > 0 {
+        eprintln!("{what}: {passes} calibration passes with moved hips");
+    }
     for m in &cal.joint_moves {
         let o = m.moved_mm;
         eprintln!(

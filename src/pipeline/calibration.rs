@@ -262,7 +262,18 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
         mv.moved_mm = (d * 1e3).into();
         mv.residual_mm = cal.landmark_centres.iter().find(|c| c.body == mv.body).map(|c| c.distance_mm);
     }
-    if moves.is_empty() || moves.iter().any(|m| Vector3::from(m.moved_mm).norm() > super::joint_centres::APPLY_MAX_MM) {
+    let far = moves.iter().find(|m| Vector3::from(m.moved_mm).norm() > super::joint_centres::APPLY_MAX_MM);
+    if let Some(m) = far {
+        let mut first = first;
+        first.registration_report.warnings.push(format!(
+            "functional hips not applied: {} would move {:.1} mm, beyond {} mm (the thigh markers do not turn about one point in the pelvis)",
+            m.joint,
+            Vector3::from(m.moved_mm).norm(),
+            super::joint_centres::APPLY_MAX_MM
+        ));
+        return Ok(Calibration { stages, seconds: started.elapsed().as_secs_f64(), ..first });
+    }
+    if moves.is_empty() {
         return Ok(Calibration { stages, seconds: started.elapsed().as_secs_f64(), ..first });
     }
     cal.joint_moves = moves;
