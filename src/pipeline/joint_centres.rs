@@ -103,8 +103,8 @@ fn joint_centre(model: &Model, y: &[f64], ws: &Workspace, c: usize) -> Vector3<f
 /// counted, each hip moves by the mean of its own offset and the other's mirrored across the
 /// pelvis's mid-plane (the plane halfway between the model's hip centres): an error of the
 /// pelvis's solved orientation (a list or a turn of a degree or two) shifts the two fits in
-/// opposite directions, so only their symmetric part is the subject's. A move further than
-/// [`APPLY_MAX_MM`] is not made. `residual_mm` is left for the caller to fill.
+/// opposite directions, so only their symmetric part is the subject's. The caller bounds the
+/// moves ([`APPLY_MAX_MM`]) and fills `residual_mm`.
 pub fn hip_moves(
     model: &Model,
     proxy: &ProxyMap,
@@ -142,7 +142,6 @@ pub fn hip_moves(
     };
     offsets
         .into_iter()
-        .filter(|(_, d)| d.norm() * 1e3 <= APPLY_MAX_MM)
         .map(|(b, d)| {
             let joint = &model.bodies[b].joint;
             let location = joint.parent_offset.translation.vector + d.component_div(&parent_scale(b));
@@ -219,5 +218,33 @@ mod tests {
         }
         let fit = sphere_centre(&s).expect("determined");
         assert!((fit - c).norm() < 1e-9, "{fit:?}");
+    }
+
+    #[test]
+    fn symmetric_hip_moves_keep_what_both_fits_share_and_drop_what_a_pelvis_list_would_make() {
+        let ctx = crate::pipeline::Context::shipped().expect("shipped");
+        let fit = |body: &str, offset_mm: [f64; 3]| FunctionalCentre {
+            body: body.into(),
+            distance_mm: Vector3::from(offset_mm).norm(),
+            offset_mm,
+            range_of_motion_deg: 40.0,
+            samples: 300,
+        };
+        // The shipped pelvis: x forward, y left, z up; the right fit 20 mm up, the left 10 mm down.
+        let centres = [fit("femur_r", [10.0, -5.0, 20.0]), fit("femur_l", [10.0, 5.0, -10.0])];
+        let p = ctx.proxy.default_proxies();
+        let moves = hip_moves(&ctx.model, &ctx.proxy, &p, &centres, true);
+        let got: Vec<Vector3<f64>> = moves.iter().map(|m| Vector3::from(m.moved_mm)).collect();
+        assert!((got[0] - Vector3::new(10.0, -5.0, 5.0)).norm() < 1e-9, "{got:?}");
+        assert!((got[1] - Vector3::new(10.0, 5.0, 5.0)).norm() < 1e-9, "{got:?}");
+        let b = ctx.model.body_index("femur_r").unwrap();
+        let moved = with_joint_moves(&ctx.model, &moves);
+        let t = moved.bodies[b].joint.parent_offset.translation.vector
+            - ctx.model.bodies[b].joint.parent_offset.translation.vector;
+        assert!((t * 1e3 - got[0]).norm() < 1e-9, "unit scale: the location moves by the offset");
+        // Per hip: each its own; too little motion: none.
+        assert_eq!(hip_moves(&ctx.model, &ctx.proxy, &p, &centres, false)[0].moved_mm, [10.0, -5.0, 20.0]);
+        let still = [FunctionalCentre { range_of_motion_deg: 5.0, ..centres[0].clone() }];
+        assert!(hip_moves(&ctx.model, &ctx.proxy, &p, &still, true).is_empty());
     }
 }
