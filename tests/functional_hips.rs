@@ -71,3 +71,14 @@ fn hips_15_mm_forward_of_the_models_are_found_and_moved_there() {
     eprintln!("hip flexion against the truth: {before:.2}° with the model's hips, {after:.2}° with the moved ones");
     assert!(after < before, "{after:.2}° moved against {before:.2}°");
 }
+
+#[test]
+fn functional_hips_is_a_setting_that_reports_by_default() {
+    let s = smocap::solve::SolverSettings::default();
+    assert_eq!(s.functional_hips, FunctionalHips::Report);
+    assert!(s.functional_hips_symmetric);
+    let table: toml::Table = toml::from_str("functional_hips = \"apply\"").expect("toml");
+    assert_eq!(s.with_overrides(&table).expect("applies").functional_hips, FunctionalHips::Apply);
+    let bad: toml::Table = toml::from_str("functional_hips = \"always\"").expect("toml");
+    assert!(s.with_overrides(&bad).is_err());
+}
