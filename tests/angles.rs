@@ -44,6 +44,35 @@ fn core(ours: &Motion, reference: &Motion) -> Comparison {
     compare(ours, reference, &opt).expect("compares")
 }
 
+/// The hip centres calibration found from the motion, and where it moved the hips.
+fn print_hips(what: &str, cal: &smocap::solve::Calibration) {
+    for c in &cal.functional_centres {
+        let o = c.offset_mm;
+        eprintln!(
+            "{what}: functional centre of {} {:+.1} {:+.1} {:+.1} mm from the model's ({:.0}° of motion, {} samples)",
+            c.body, o[0], o[1], o[2], c.range_of_motion_deg, c.samples
+        );
+    }
+    for c in &cal.landmark_centres {
+        let o = c.offset_mm;
+        eprintln!(
+            "{what}: before registration, functional centre of {} {:+.1} {:+.1} {:+.1} mm",
+            c.body, o[0], o[1], o[2]
+        );
+    }
+    let passes = cal.stages.iter().filter(|s| s.stage.ends_with(":registration")).count();
+    if passes > 0 {
+        eprintln!("{what}: {passes} calibration passes with moved hips");
+    }
+    for m in &cal.joint_moves {
+        let o = m.moved_mm;
+        eprintln!(
+            "{what}: {} moved {:+.1} {:+.1} {:+.1} mm, functional centre {:?} mm from it after",
+            m.joint, o[0], o[1], o[2], m.residual_mm
+        );
+    }
+}
+
 fn mean_rmse(c: &Comparison) -> f64 {
     c.coordinates.iter().map(|k| k.rmse).sum::<f64>() / c.coordinates.len() as f64
 }
@@ -67,6 +96,7 @@ fn opencap_angles_agree_with_addbiomechanics_ik() {
         .collect();
     let motions: Vec<(&str, &MarkerTrial)> = names.iter().copied().zip(&trials).collect();
     let (cal, placed) = calibrate_placed_with(&sub.ctx, &[], &motions).expect("calibrates");
+    print_hips("OpenCap", &cal);
     let ctx = placed.expect("registered");
     for (n, t) in names.iter().zip(&trials) {
         let r = solve_trial(&ctx, n, t, &cal, 2).expect("solves");
@@ -95,6 +125,7 @@ fn plug_in_gait() -> Option<[Comparison; 2]> {
     let read = |p: &Path| read_trial(&sub.ctx, p, &InputOptions::default()).expect("trial").0;
     let (ts, tm) = (read(&st), read(&dir.join("PiG_Motion3_FF.c3d")));
     let (cal, placed) = calibrate_placed_with(&sub.ctx, &[("static", &ts)], &[("gait", &tm)]).expect("calibrates");
+    print_hips("Plug-in Gait", &cal);
     let ctx = placed.expect("registered");
     let map = AngleMap::plug_in_gait();
     let coords = ["hip_flexion", "knee_angle", "ankle_angle"];
@@ -188,6 +219,7 @@ fn opensim_workflows_agree_with_opensims_own_scale_and_ik() {
         let read = |p: &str| read_trial(&sub.ctx, &dir.join(p), &InputOptions::default()).expect("trial").0;
         let (ts, tm) = (read(stat), read(trial));
         let (cal, placed) = calibrate_placed_with(&sub.ctx, &[("static", &ts)], &[("walk", &tm)]).expect("calibrates");
+        print_hips(name, &cal);
         let ctx = placed.unwrap_or(sub.ctx.clone());
         let r = solve_trial(&ctx, name, &tm, &cal, 2).expect("solves");
         let c =

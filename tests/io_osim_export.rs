@@ -348,3 +348,42 @@ fn unequal_scale_factors_scale_inertia_as_a_cylinder() {
     let got = scale_inertia(&i(rad, len), m, m * 8.0, &Vector3::new(2.0, 2.0, 2.0), true);
     assert!((got[0] - i(rad, len)[0] * 32.0).abs() <= 1e-12);
 }
+
+#[test]
+fn hips_moved_by_calibration_are_written_where_the_subjects_model_has_them() {
+    let path = shared("datasets/gait2354_subject01/gait2354_simbody.osim");
+    if !path.exists() {
+        eprintln!("skipped: {} is absent", path.display());
+        return;
+    }
+    let (generic, _) = read_osim(&path).expect("model");
+    // The functional hips move the hip joints in the pelvis (`functional_hips = "apply"`).
+    let moves: Vec<smocap::solve::prior::JointMove> = ["femur_r", "femur_l"]
+        .iter()
+        .map(|b| {
+            let joint = &generic.bodies[generic.body_index(b).expect("femur")].joint;
+            let t = joint.parent_offset.translation.vector + Vector3::new(0.012, -0.005, 0.008);
+            smocap::solve::prior::JointMove {
+                body: b.to_string(),
+                joint: joint.name.clone(),
+                location_m: t.into(),
+                moved_mm: [12.0, -5.0, 8.0],
+                residual_mm: None,
+            }
+        })
+        .collect();
+    let moved = smocap::pipeline::joint_centres::with_joint_moves(&generic, &moves);
+    let mut r = rng(5);
+    let s: Vec<Vector3<f64>> = (0..moved.nb()).map(|_| Vector3::from_fn(|_, _| r.random_range(0.8..1.25))).collect();
+    let text = std::fs::read_to_string(&path).expect("text");
+    let (out, _) = scale_osim(&text, "gait2354_simbody.osim", &moved, &s, MassScaling::default()).expect("scaled");
+    let (back, _) = parse_osim(&out, "exported.osim").expect("re-import");
+    let (e, n) = fk_difference(&moved, &s, &back, |_| true);
+    println!("gait2354 with moved hips, export vs in-memory: {e:.3e} m over {n} points");
+    assert!(e <= 1e-9, "{e} m");
+    // The generic model's own joints are written as before.
+    let (plain, _) = scale_osim(&text, "gait2354_simbody.osim", &generic, &s, MassScaling::default()).expect("scaled");
+    let (back, _) = parse_osim(&plain, "exported.osim").expect("re-import");
+    assert!(fk_difference(&generic, &s, &back, |_| true).0 <= 1e-9);
+    assert_ne!(plain, out, "the moved hips change the file");
+}

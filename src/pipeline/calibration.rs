@@ -26,6 +26,7 @@ use crate::solve::prior::{
     measure, Anisotropy, Anthropometric, GlobalTerm, LandmarkAnchor, OffsetPrior, PriorReport, ScaleReport,
     ScaleToward, StaticPosture,
 };
+use crate::solve::FunctionalHips;
 use crate::solve::{make_qp, Calibration, FrameSolver};
 use nalgebra::{DVector, Vector3};
 
@@ -202,7 +203,99 @@ enum Kind {
 /// morphology that fits both (`calibration_frames` from the static trials with their weights,
 /// `calibration_frames_motion` spread over the motion trials with the motion weights). Marker
 /// placement (OpenSim's MarkerPlacer) places on the static frames when there are any.
+///
+/// With `functional_hips = "apply"` and registration, the hips whose functional centres are well
+/// determined ([`super::joint_centres::hip_moves`]) move there and the subject is calibrated again
+/// with them (every stage: the frames' poses, scales and registered offsets all depend on where
+/// the hips are); the calibration says where they moved (`joint_moves`), and the subject's model
+/// ([`Context::pinned_to`]) has them there.
 pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
+    ctx: &Context,
+    statics: &[(&str, &T)],
+    motions: &[(&str, &T)],
+) -> Result<Calibration, TrialError> {
+    let started = std::time::Instant::now();
+    let s = &ctx.settings;
+    let first = calibrate_pass(ctx, statics, motions)?;
+    if s.functional_hips != FunctionalHips::Apply || !s.registration || s.marker_placement {
+        return Ok(first);
+    }
+    // A fixed point: the hips move until the functional centres the calibrated subject's
+    // landmarks give agree with them (each pass sees only part of the remaining offset, as the
+    // poses partly absorb a misplaced hip).
+    let mut stages = first.stages.clone();
+    let mut moved = ctx.clone();
+    let mut cal = first.clone();
+    let mut moves: Vec<crate::solve::prior::JointMove> = Vec::new();
+    let mut refused = None;
+    for pass in 1..=super::joint_centres::APPLY_MAX_PASSES {
+        let step = super::joint_centres::hip_moves(
+            &moved.model,
+            &moved.proxy,
+            &cal.proxies,
+            &cal.landmark_centres,
+            s.functional_hips_symmetric,
+        );
+        let largest = step.iter().map(|m| Vector3::from(m.moved_mm).norm()).fold(0.0, f64::max);
+        if step.is_empty() || largest < super::joint_centres::APPLY_TOL_MM {
+            break;
+        }
+        for m in step {
+            match moves.iter_mut().find(|k| k.body == m.body) {
+                Some(k) => k.location_m = m.location_m,
+                None => moves.push(m),
+            }
+        }
+        // Beyond the plausible bound the fits are not taken: the first calibration stands.
+        total_moves(ctx, &cal.proxies, &mut moves);
+        let bound = super::joint_centres::APPLY_MAX_MM;
+        if let Some(m) = moves.iter().find(|m| Vector3::from(m.moved_mm).norm() > bound) {
+            refused = Some(format!(
+                "functional hips not applied: {} would move {:.1} mm after {} pass(es), beyond {bound} mm (the thigh markers do not turn about one point of the pelvis)",
+                m.joint,
+                Vector3::from(m.moved_mm).norm(),
+                pass - 1
+            ));
+            break;
+        }
+        moved = ctx.with_joint_moves(&moves);
+        cal = calibrate_pass(&moved, statics, motions)?;
+        stages
+            .extend(cal.stages.iter().map(|st| StageCost { stage: format!("hips_{pass}:{}", st.stage), ..st.clone() }));
+    }
+    let seconds = started.elapsed().as_secs_f64();
+    if let Some(why) = refused {
+        let mut first = first;
+        first.registration_report.warnings.push(why);
+        return Ok(Calibration { stages, seconds, ..first });
+    }
+    if moves.is_empty() {
+        return Ok(Calibration { stages, seconds, ..first });
+    }
+    total_moves(ctx, &cal.proxies, &mut moves);
+    for mv in &mut moves {
+        mv.residual_mm = cal.landmark_centres.iter().find(|c| c.body == mv.body).map(|c| c.distance_mm);
+    }
+    cal.joint_moves = moves;
+    Ok(Calibration { stages, seconds, ..cal })
+}
+
+/// Sets each move's `moved_mm`: its joint's new location against `ctx`'s model's, at the scales
+/// of `proxies`, in the parent's frame.
+fn total_moves(ctx: &Context, proxies: &[f64], moves: &mut [crate::solve::prior::JointMove]) {
+    let y = ctx.proxy.state(proxies);
+    for mv in moves {
+        let Some(b) = ctx.model.body_index(&mv.body) else { continue };
+        let p = ctx.model.bodies[b].parent.unwrap_or(b);
+        let scale = Vector3::from_fn(|a, _| y[ctx.model.scale_index(p, a)]);
+        let d = (Vector3::from(mv.location_m) - ctx.model.bodies[b].joint.parent_offset.translation.vector)
+            .component_mul(&scale);
+        mv.moved_mm = (d * 1e3).into();
+    }
+}
+
+/// One calibration of the subject on `ctx`'s model (see [`calibrate_subject_with`]).
+fn calibrate_pass<T: TrialFrames + ?Sized>(
     ctx: &Context,
     statics: &[(&str, &T)],
     motions: &[(&str, &T)],
@@ -401,6 +494,13 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     };
     let place_frames: Vec<&[f64]> = place_on.iter().map(|&i| slices[i]).collect();
     let place_poses: Vec<Vec<f64>> = place_on.iter().map(|&i| state.poses[i].clone()).collect();
+    // The hips' functional centres in the pelvis frame the landmarks give at the model's
+    // offsets, before registration can move the pelvis's markers to absorb a misplaced hip.
+    let landmark_centres = if settings.functional_hips == FunctionalHips::Apply {
+        super::joint_centres::functional_centres(&ctx.model, &ctx.proxy, &slices, &state.poses)
+    } else {
+        Vec::new()
+    };
     // Markers some calibration frame observes with a weight: those registration can move.
     let seen: Vec<bool> = (0..nm)
         .map(|m| slices.iter().zip(&w_all).any(|(f, w)| w[m] > 0.0 && f[3 * m..3 * m + 3].iter().all(|v| !v.is_nan())))
@@ -440,8 +540,11 @@ pub fn calibrate_subject_with<T: TrialFrames + ?Sized>(
     cal.static_frames = kinds.iter().filter(|k| **k == Kind::Static).count();
     cal.posture = super::plausibility::static_posture(ctx, &cal.frame_proxies[..cal.static_frames]);
     cal.registration_report = registration_report(ctx, &cal);
-    cal.functional_centres =
-        super::joint_centres::functional_centres(&ctx.model, &ctx.proxy, &slices, &cal.frame_proxies);
+    cal.landmark_centres = landmark_centres;
+    if settings.functional_hips != FunctionalHips::Off {
+        cal.functional_centres =
+            super::joint_centres::functional_centres(&ctx.model, &ctx.proxy, &slices, &cal.frame_proxies);
+    }
     // How each motion trial's calibration frames fit the calibrated subject, against its siblings.
     let mut model = ctx.model.clone();
     if let Some(o) = &cal.marker_offsets {

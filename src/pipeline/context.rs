@@ -189,11 +189,22 @@ impl Context {
         Ok(Context { model, proxy, ..self.clone() })
     }
 
+    /// The same subject with the joints of `moves` at their new locations (calibration's
+    /// functional hips, [`crate::solve::Calibration::joint_moves`]; applying them again changes
+    /// nothing).
+    pub fn with_joint_moves(&self, moves: &[crate::solve::prior::JointMove]) -> Context {
+        if moves.is_empty() {
+            return self.clone();
+        }
+        Context { model: super::joint_centres::with_joint_moves(&self.model, moves), ..self.clone() }
+    }
+
     /// The subject as its trials are solved: the calibration's morphology (scale proxies pinned
-    /// to their calibrated values, so every frame of every trial has the one morphology) and
-    /// its markers where calibration registered or placed them.
+    /// to their calibrated values, so every frame of every trial has the one morphology, and
+    /// the hip joints where calibration moved them) and its markers where calibration
+    /// registered or placed them.
     pub fn pinned_to(&self, cal: &crate::solve::Calibration) -> Context {
-        let mut ctx = self.clone();
+        let mut ctx = self.with_joint_moves(&cal.joint_moves);
         if let Some(o) = &cal.marker_offsets {
             for (m, o) in ctx.model.markers.iter_mut().zip(o) {
                 m.offset = *o;

@@ -5,11 +5,16 @@
 //! at the calibrated scales. The joint calibration already places the hips where the markers turn
 //! about them; a functional centre far from the model's says that the model cannot (a pelvis
 //! scaled wrongly, a mislabelled thigh marker) and is reported.
+//!
+//! With `functional_hips = "apply"` ([`hip_moves`]), a well-determined fit moves the subject's
+//! hip joint there: the joint's location in the pelvis frame (its parent offset, which scales
+//! with the pelvis) gains the offset divided by the pelvis's scale factors, so that at the
+//! calibrated scales the joint lies on the functional centre.
 
 use crate::kinematics::cpu::{forward, Workspace};
 use crate::model::proxy::ProxyMap;
 use crate::model::Model;
-use crate::solve::prior::FunctionalCentre;
+use crate::solve::prior::{FunctionalCentre, JointMove};
 use nalgebra::{DMatrix, DVector, Vector3};
 
 /// Below this range of motion of the child relative to the root (deg), a sphere fit is not
@@ -17,6 +22,18 @@ use nalgebra::{DMatrix, DVector, Vector3};
 pub const MIN_ROM_DEG: f64 = 20.0;
 /// A functional centre further than this from the model's (mm) is a warning.
 pub const WARN_MM: f64 = 30.0;
+/// `functional_hips = "apply"` moves a hip only to a centre at most this far from the model's
+/// (mm): hip centres of regression methods and functional ones differ by 10–20 mm (Davis against
+/// a sphere fit); beyond 30 mm the fit, not the model, is the likelier culprit (a thigh marker
+/// that slid, too little motion in one plane) and it is reported, not applied.
+pub const APPLY_MAX_MM: f64 = 30.0;
+/// Most calibration passes `apply` makes while moving the hips toward their fixed point.
+pub const APPLY_MAX_PASSES: usize = 4;
+/// `apply` stops moving the hips when a pass would move neither by more than this (mm).
+pub const APPLY_TOL_MM: f64 = 1.0;
+/// Fewest marker positions a fit needs before `apply` trusts it (three thigh markers in 34
+/// frames).
+pub const APPLY_MIN_SAMPLES: usize = 100;
 
 /// The functional centres of the root body's joints over `frames` (observed markers per frame,
 /// `3·marker + axis`, NaN gaps) at the proxies `poses` of each frame.
@@ -47,7 +64,7 @@ pub fn functional_centres(
         forward(model, &y, &mut ws);
         let (r, t) = (ws.body_rot[root], ws.body_pos[root]);
         for (i, &c) in children.iter().enumerate() {
-            model_centre[i].get_or_insert_with(|| r.transpose() * (ws.body_pos[c] - t));
+            model_centre[i].get_or_insert_with(|| r.transpose() * (joint_centre(model, &y, &ws, c) - t));
             orientations[i].push(r.transpose() * ws.body_rot[c]);
             for m in (0..model.markers.len()).filter(|&m| model.markers[m].body == c) {
                 let x = Vector3::new(obs[3 * m], obs[3 * m + 1], obs[3 * m + 2]);
@@ -71,6 +88,83 @@ pub fn functional_centres(
         });
     }
     out
+}
+
+/// Where body `c`'s joint turns it (world frame): its origin plus its child offset, at the last
+/// [`forward`]'s state `y`.
+fn joint_centre(model: &Model, y: &[f64], ws: &Workspace, c: usize) -> Vector3<f64> {
+    let s = Vector3::from_fn(|a, _| y[model.scale_index(c, a)]);
+    ws.body_pos[c] + ws.body_rot[c] * s.component_mul(&model.bodies[c].joint.child_offset.translation.vector)
+}
+
+/// The hip moves that `functional_hips = "apply"` makes from `centres` (found on `model` at the
+/// calibrated `proxies`). A centre counts when it is fitted over at least [`MIN_ROM_DEG`] of
+/// motion from at least [`APPLY_MIN_SAMPLES`] marker positions. With `symmetric` and both hips
+/// counted, each hip moves by the mean of its own offset and the other's mirrored across the
+/// pelvis's mid-plane (the plane halfway between the model's hip centres): an error of the
+/// pelvis's solved orientation (a list or a turn of a degree or two) shifts the two fits in
+/// opposite directions, so only their symmetric part is the subject's. The caller bounds the
+/// moves ([`APPLY_MAX_MM`]) and fills `residual_mm`.
+pub fn hip_moves(
+    model: &Model,
+    proxy: &ProxyMap,
+    proxies: &[f64],
+    centres: &[FunctionalCentre],
+    symmetric: bool,
+) -> Vec<JointMove> {
+    let y = proxy.state(proxies);
+    let counted: Vec<(usize, Vector3<f64>)> = centres
+        .iter()
+        .filter(|c| c.range_of_motion_deg >= MIN_ROM_DEG && c.samples >= APPLY_MIN_SAMPLES)
+        .filter(|c| c.offset_mm.iter().all(|v| v.is_finite()))
+        .filter_map(|c| Some((model.body_index(&c.body)?, Vector3::from(c.offset_mm) * 1e-3)))
+        .filter(|(b, _)| model.bodies[*b].parent.is_some())
+        .collect();
+    // Each hip's location in the parent's frame at the calibrated scales.
+    let parent_scale = |b: usize| {
+        let p = model.bodies[b].parent.unwrap_or(b);
+        Vector3::from_fn(|a, _| y[model.scale_index(p, a)])
+    };
+    let at_scale = |b: usize| parent_scale(b).component_mul(&model.bodies[b].joint.parent_offset.translation.vector);
+    let offsets: Vec<(usize, Vector3<f64>)> = match counted.as_slice() {
+        [(a, da), (b, db)] if symmetric => {
+            let u = (at_scale(*a) - at_scale(*b)).try_normalize(1e-9);
+            match u {
+                Some(u) => {
+                    let mirror = |v: &Vector3<f64>| v - 2.0 * v.dot(&u) * u;
+                    let sa = (da + mirror(db)) / 2.0;
+                    vec![(*a, sa), (*b, mirror(&sa))]
+                }
+                None => counted.clone(),
+            }
+        }
+        _ => counted.clone(),
+    };
+    offsets
+        .into_iter()
+        .map(|(b, d)| {
+            let joint = &model.bodies[b].joint;
+            let location = joint.parent_offset.translation.vector + d.component_div(&parent_scale(b));
+            JointMove {
+                body: model.bodies[b].name.clone(),
+                joint: joint.name.clone(),
+                location_m: location.into(),
+                moved_mm: (d * 1e3).into(),
+                residual_mm: None,
+            }
+        })
+        .collect()
+}
+
+/// `model` with the joints of `moves` at their new locations.
+pub fn with_joint_moves(model: &Model, moves: &[JointMove]) -> Model {
+    let mut m = model.clone();
+    for mv in moves {
+        if let Some(b) = m.body_index(&mv.body) {
+            m.bodies[b].joint.parent_offset.translation.vector = Vector3::from(mv.location_m);
+        }
+    }
+    m
 }
 
 /// The largest rotation between any orientation and their first (deg).
@@ -124,5 +218,33 @@ mod tests {
         }
         let fit = sphere_centre(&s).expect("determined");
         assert!((fit - c).norm() < 1e-9, "{fit:?}");
+    }
+
+    #[test]
+    fn symmetric_hip_moves_keep_what_both_fits_share_and_drop_what_a_pelvis_list_would_make() {
+        let ctx = crate::pipeline::Context::shipped().expect("shipped");
+        let fit = |body: &str, offset_mm: [f64; 3]| FunctionalCentre {
+            body: body.into(),
+            distance_mm: Vector3::from(offset_mm).norm(),
+            offset_mm,
+            range_of_motion_deg: 40.0,
+            samples: 300,
+        };
+        // The shipped pelvis: x forward, y left, z up; the right fit 20 mm up, the left 10 mm down.
+        let centres = [fit("femur_r", [10.0, -5.0, 20.0]), fit("femur_l", [10.0, 5.0, -10.0])];
+        let p = ctx.proxy.default_proxies();
+        let moves = hip_moves(&ctx.model, &ctx.proxy, &p, &centres, true);
+        let got: Vec<Vector3<f64>> = moves.iter().map(|m| Vector3::from(m.moved_mm)).collect();
+        assert!((got[0] - Vector3::new(10.0, -5.0, 5.0)).norm() < 1e-9, "{got:?}");
+        assert!((got[1] - Vector3::new(10.0, 5.0, 5.0)).norm() < 1e-9, "{got:?}");
+        let b = ctx.model.body_index("femur_r").unwrap();
+        let moved = with_joint_moves(&ctx.model, &moves);
+        let t = moved.bodies[b].joint.parent_offset.translation.vector
+            - ctx.model.bodies[b].joint.parent_offset.translation.vector;
+        assert!((t * 1e3 - got[0]).norm() < 1e-9, "unit scale: the location moves by the offset");
+        // Per hip: each its own; too little motion: none.
+        assert_eq!(hip_moves(&ctx.model, &ctx.proxy, &p, &centres, false)[0].moved_mm, [10.0, -5.0, 20.0]);
+        let still = [FunctionalCentre { range_of_motion_deg: 5.0, ..centres[0].clone() }];
+        assert!(hip_moves(&ctx.model, &ctx.proxy, &p, &still, true).is_empty());
     }
 }

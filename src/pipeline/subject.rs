@@ -165,7 +165,12 @@ pub fn calibrate_placed(
     inputs: &[(&str, &MarkerTrial)],
 ) -> Result<(Calibration, Option<Context>), SetupError> {
     let c = calibrate_subject(ctx, inputs)?;
-    let placed = c.marker_offsets.as_ref().map(|o| ctx.with_marker_offsets(o)).transpose()?;
+    let placed = c
+        .marker_offsets
+        .as_ref()
+        .map(|o| ctx.with_marker_offsets(o))
+        .transpose()?
+        .map(|p| p.with_joint_moves(&c.joint_moves));
     Ok((c, placed))
 }
 
@@ -177,6 +182,11 @@ pub fn calibrate_placed_with<T: super::frames::TrialFrames + ?Sized>(
     motions: &[(&str, &T)],
 ) -> Result<(Calibration, Option<Context>), SetupError> {
     let c = super::calibration::calibrate_subject_with(ctx, statics, motions)?;
-    let placed = c.marker_offsets.as_ref().map(|o| ctx.with_marker_offsets(o)).transpose()?;
+    let placed = c
+        .marker_offsets
+        .as_ref()
+        .map(|o| ctx.with_marker_offsets(o))
+        .transpose()?
+        .map(|p| p.with_joint_moves(&c.joint_moves));
     Ok((c, placed))
 }

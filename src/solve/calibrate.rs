@@ -74,6 +74,15 @@ pub struct Calibration {
     /// The root's joints (the hips) found from the motion against the calibrated model's.
     #[serde(default)]
     pub functional_centres: Vec<super::prior::FunctionalCentre>,
+    /// The hip joints moved to their functional centres (`functional_hips = "apply"`); the
+    /// subject's model ([`crate::pipeline::Context::pinned_to`]) has them there.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub joint_moves: Vec<super::prior::JointMove>,
+    /// With `functional_hips = "apply"`: the hips' functional centres in the pelvis frame of the
+    /// first stage (landmarks at the model's offsets, before registration), which the moves
+    /// are made from.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub landmark_centres: Vec<super::prior::FunctionalCentre>,
     /// Motion trials whose calibration frames the calibrated subject fits far worse than their
     /// siblings' (`pipeline::subject_check::misfits`): another person's trial, or markers placed
     /// differently. Makes the calibration suspect.
@@ -733,6 +742,8 @@ pub fn finish(
         posture: Default::default(),
         registration_report: Default::default(),
         functional_centres: Vec::new(),
+        joint_moves: Vec::new(),
+        landmark_centres: Vec::new(),
         trial_misfits: Vec::new(),
         stages: Vec::new(),
     }

@@ -477,6 +477,26 @@ pub struct RegistrationReport {
     pub suspect: Vec<String>,
 }
 
+/// A joint that calibration moved to where the motion says it is (`functional_hips = "apply"`,
+/// [`crate::pipeline::joint_centres`]).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct JointMove {
+    /// The body whose joint moved (a child of the root: a femur).
+    pub body: String,
+    /// The joint's name in the model.
+    pub joint: String,
+    /// The joint's location in its parent's frame at unit scale after the move (m): the model's
+    /// parent offset translation, which scales with the parent as every joint location does.
+    pub location_m: [f64; 3],
+    /// The move at the subject's scale, in the parent's frame (mm; the shipped model's pelvis:
+    /// x forward, y left, z up).
+    pub moved_mm: [f64; 3],
+    /// The functional centre's distance from the moved joint after the final solve (mm; `None`
+    /// when that solve's fit is not determined).
+    #[serde(default)]
+    pub residual_mm: Option<f64>,
+}
+
 /// A joint's centre found from the motion against the calibrated model's
 /// ([`crate::pipeline::joint_centres`]).
 #[derive(Clone, Debug, Serialize, Deserialize)]

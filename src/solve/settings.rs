@@ -40,6 +40,23 @@ pub enum Presolve {
     Always,
 }
 
+/// What calibration does with the hip centres it finds from the motion
+/// ([`crate::pipeline::joint_centres`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum FunctionalHips {
+    /// Not computed.
+    Off,
+    /// Computed and reported against the model's (`calibration.functional_centres`); the
+    /// model's hips stay where its scaling puts them.
+    #[default]
+    Report,
+    /// Where a fit is well determined, the subject's hip joints move to it (in the pelvis frame)
+    /// and registration is solved again with them: every later stage, the solved trials and the
+    /// exported model use the moved hips (docs/CALIBRATION.md, "Functional hip centres").
+    Apply,
+}
+
 /// Trust-region QP settings (units: metres, radians; scale factors dimensionless).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -189,6 +206,16 @@ pub struct SolverSettings {
     /// 34–35 mm and its knee markers up to 45 mm for subject01); beyond that, the marker is not
     /// where the model thinks (a mislabelled or misplaced marker, or a model that does not fit).
     pub registration_suspect_mm: f64,
+    /// Functional hip centres (`off`, `report`, `apply`): a sphere fit of the thigh markers in the
+    /// pelvis frame over the calibration frames; with `apply`, a fit over at least
+    /// `joint_centres::MIN_ROM_DEG` of motion, within `joint_centres::APPLY_MAX_MM` of the model's
+    /// centre, moves the hip joint (with registration only: an OpenSim Scale setup scales as
+    /// OpenSim does). Default `report` (docs/CALIBRATION.md gives what `apply` changes).
+    pub functional_hips: FunctionalHips,
+    /// With `functional_hips = "apply"`: both hips move by the symmetric part of their two
+    /// functional offsets (mirrored across the pelvis's mid-plane), which an error of the
+    /// pelvis's solved orientation does not reach. Default true (docs/CALIBRATION.md).
+    pub functional_hips_symmetric: bool,
     /// Label quality control of every trial before it is calibrated and solved (swapped labels,
     /// jumps, ghosts: `crate::pipeline::label_qc`); `--label-qc` sets its mode.
     pub label_qc: crate::pipeline::label_qc::LabelQcSettings,
@@ -236,6 +263,8 @@ impl Default for SolverSettings {
             anisotropy_sd: 0.05,
             static_posture_sd_deg: 5.0,
             registration_suspect_mm: 50.0,
+            functional_hips: FunctionalHips::default(),
+            functional_hips_symmetric: true,
             label_qc: Default::default(),
         }
     }

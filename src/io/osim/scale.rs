@@ -92,7 +92,10 @@ pub fn scale_osim(
                 let scope = n.parent_element().filter(|p| p.has_tag_name("frames")).and_then(|p| p.parent_element());
                 let base = ctx.text(n, "socket_parent").and_then(|(_, p)| s.base(scope, p, 0));
                 if let Some(f) = base {
-                    s.vec_edit(&ctx, n, "translation", &f, Vector3::zeros())?;
+                    match s.joint_location(&ctx, scope, n) {
+                        Some(t) => s.vec_set(&ctx, n, "translation", t.component_mul(&f))?,
+                        None => s.vec_edit(&ctx, n, "translation", &f, Vector3::zeros())?,
+                    }
                     s.geometry(&ctx, n, &f)?;
                     s.wrap_objects(&ctx, n, &f)?;
                 }
@@ -206,6 +209,32 @@ impl<'a> Scaler<'a, '_> {
             self.insert_before_end(ctx, n, format!("<{tag}>{}</{tag}>", vec3(&default.component_mul(f))))?;
         }
         Ok(())
+    }
+
+    /// `<tag>` of `n` set to `v` (added when absent and `v` is not zero).
+    fn vec_set(&mut self, ctx: &Ctx<'a>, n: Node<'a, 'a>, tag: &str, v: Vector3<f64>) -> Result<(), OsimError> {
+        if let Some(c) = child(n, tag) {
+            self.replace(c, format!("<{tag}>{}</{tag}>", vec3(&v)));
+        } else if v != Vector3::zeros() {
+            self.insert_before_end(ctx, n, format!("<{tag}>{}</{tag}>", vec3(&v)))?;
+        }
+        Ok(())
+    }
+
+    /// Where the model puts the joint whose parent frame `frame` is (unit scale, in the parent
+    /// body's frame), when `frame` is that joint's `socket_parent_frame` and hangs directly on a
+    /// body: the model's location is written rather than the file's, so that a joint calibration
+    /// moved (the functional hips) is where the subject's model has it. For every other joint
+    /// the two are the same value.
+    fn joint_location(&self, ctx: &Ctx<'a>, scope: Option<Node<'a, 'a>>, frame: Node<'a, 'a>) -> Option<Vector3<f64>> {
+        let j = scope?;
+        let name = frame.attribute("name")?;
+        if last_segment(ctx.text(j, "socket_parent_frame")?.1) != name {
+            return None;
+        }
+        self.body_scale(last_segment(ctx.text(frame, "socket_parent")?.1))?;
+        let jname = j.attribute("name")?;
+        self.model.bodies.iter().find(|b| b.joint.name == jname).map(|b| b.joint.parent_offset.translation.vector)
     }
 
     fn insert_before_end(&mut self, ctx: &Ctx<'a>, n: Node<'a, 'a>, text: String) -> Result<(), OsimError> {
