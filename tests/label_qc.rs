@@ -122,13 +122,15 @@ fn injected_swaps_are_found_and_repaired_on_twenty_seeds_and_clean_trials_have_n
 }
 
 #[test]
-fn injected_jumps_are_found_and_masked_on_twenty_seeds() {
+fn injected_jumps_are_found_and_masked_on_twenty_seeds_and_clean_trials_have_none() {
     let ctx = Context::shipped().expect("shipped model");
     let markers = ["LKNE", "RHEE", "LASI", "RTHI", "LANK", "RTOE", "LKNM", "RTIB", "LMT5", "SACR"];
     let (mut injected, mut hits) = (0, 0);
     let mut missed = Vec::new();
     for seed in 1..=20u64 {
         let s = synth(&ctx, seed, 400);
+        let clean = screen(&ctx, &s.trial);
+        assert!(clean.events.is_empty(), "seed {seed}: events on the clean trial: {:?}", clean.events);
         let mut r = rng(seed + 2000);
         let mut t = s.trial.clone();
         let m = markers[(seed as usize) % markers.len()];
