@@ -60,7 +60,10 @@ fn plain_progress_lines_and_a_final_table_when_stderr_is_not_a_terminal() {
     let (out, err) = (text(&o.stdout), text(&o.stderr));
     assert!(o.status.success(), "{err}");
     assert!(err.contains("[1/2] lab/subj01/walk0") && err.contains("[2/2] lab/subj01/walk0"), "{err}");
-    assert!(err.contains("done: 2/2 trials (0 failed), 60/60 frames"), "{err}");
+    assert!(err.contains("done: 1/1 subjects calibrated, 2/2 trials (0 failed), 60/60 frames"), "{err}");
+    // Where the workers' time went, at the end of the line.
+    let done = err.lines().find(|l| l.starts_with("done: ")).expect("a done line");
+    assert!(done.contains("(calibration ") && done.contains(" s, solving ") && done.ends_with(" s)"), "{done}");
     assert!(!err.contains('\u{1b}'), "no terminal escapes in plain output: {err:?}");
     for col in ["dataset", "ok", "failed", "frames", "frames/s", "ms/frame p50/90", "iter p50/90", "RMSE mm p50/90"] {
         assert!(out.contains(col), "table column {col}: {out}");

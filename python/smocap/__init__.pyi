@@ -300,6 +300,8 @@ def convert(
     ``progress`` is called with a dict: ``event`` (``'note'``, ``'trial'``: a trial's line,
     ``'progress'``: every ``progress_every`` s, ``'done'``), ``line`` (the command line's text)
     and the counters ``trials_done``, ``trials_total``, ``trials_failed``, ``frames_done``,
-    ``frames_total``, ``elapsed_s``. Failed trials are listed in the summary with their reason;
+    ``frames_total``, ``subjects_calibrated``, ``subjects_total``, ``calibration_s`` and
+    ``solve_s`` (the workers' time so far), ``elapsed_s``. Failed trials are listed in the
+    summary with their reason;
     a run that cannot start raises :class:`ArchiveError`.
     """

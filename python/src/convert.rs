@@ -35,6 +35,10 @@ impl Reporter {
                 d.set_item("trials_failed", s.trials_failed)?;
                 d.set_item("frames_done", s.frames_done)?;
                 d.set_item("frames_total", s.frames_total)?;
+                d.set_item("subjects_calibrated", s.subjects_calibrated)?;
+                d.set_item("subjects_total", s.subjects_total)?;
+                d.set_item("calibration_s", s.calibration_s)?;
+                d.set_item("solve_s", s.solve_s)?;
                 d.set_item("elapsed_s", self.start.elapsed().as_secs_f64())?;
                 cb.call1(py, (d,))?;
                 Ok(())
@@ -57,7 +61,8 @@ impl Reporter {
 /// `shard` is 'I/N' (default: from Slurm/Kubernetes variables, as the command line). `progress`
 /// is called with a dict: `event` ('note', 'trial': a trial's line, 'progress': every
 /// `progress_every` s, 'done'), `line` (the command line's text) and the counters `trials_done`,
-/// `trials_total`, `trials_failed`, `frames_done`, `frames_total`, `elapsed_s`. Failed trials
+/// `trials_total`, `trials_failed`, `frames_done`, `frames_total`, `subjects_calibrated`,
+/// `subjects_total`, `calibration_s` and `solve_s` (the workers' time so far), `elapsed_s`. Failed trials
 /// are listed in the summary with their reason; a run that cannot start raises ArchiveError.
 #[pyfunction]
 #[pyo3(signature = (config, out, jobs = None, resume = false, shard = None,

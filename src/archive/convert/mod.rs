@@ -105,6 +105,7 @@ pub fn convert(
     if let Some(p) = &opt.progress {
         let name = |g: &SubjectGroup| &datasets[g.dataset].name;
         p.plan(groups.iter().flat_map(|g| g.trials.iter().map(move |t| (format!("{}/{}", name(g), t.rel), t.frames))));
+        p.subjects_total.store(groups.len() as u64, std::sync::atomic::Ordering::Relaxed);
     }
     let done = std::sync::atomic::AtomicUsize::new(0);
     let report = |t: &TrialOutcome| {
@@ -112,6 +113,7 @@ pub fn convert(
         if let Some(p) = &opt.progress {
             let solved = (t.status == "ok" || t.status == "suspect").then_some(t.frames as u64);
             p.finished(&format!("{}/{}", t.dataset, t.trial), t.status == "failed" || t.status == "suspect", solved);
+            p.solved_for(t.solve_s);
         }
         let what = match (&t.status[..], &t.error) {
             ("failed", Some(e)) => format!("failed: {e}"),
@@ -191,15 +193,22 @@ fn subject(
     report: &(dyn Fn(&TrialOutcome) + Sync),
     log: &(dyn Fn(&str) + Sync),
 ) -> (Vec<TrialOutcome>, Option<SubjectCalibration>) {
+    let progress = opt.progress.as_deref();
     let (outcomes, todo) = plan::pending(d, g, opt, conflicts);
     outcomes.iter().for_each(report);
     if todo.is_empty() {
+        // Nothing to calibrate for (every trial done or contested): counted as calibrated.
+        progress.inspect(|p| p.calibrated(0.0));
         return (outcomes, None);
     }
     let fail_all = |why: String| -> Vec<TrialOutcome> {
         todo.iter().map(|(t, out, _)| failed(d, g, t, out, why.clone())).inspect(report).collect()
     };
-    let (cal, input) = match calibrate::calibrate(d, g, opt, log) {
+    progress.inspect(|p| p.calibrating());
+    let calibrated = calibrate::calibrate(d, g, opt, log);
+    let seconds = calibrated.as_ref().map_or(0.0, |(c, _)| c.calibration.seconds);
+    progress.inspect(|p| p.calibrated(seconds));
+    let (cal, input) = match calibrated {
         Ok(c) => c,
         Err(why) => return ([outcomes, fail_all(why)].concat(), None),
     };
