@@ -12,7 +12,8 @@ use super::mcap_out::{McapOutError, RunInfo, TrialNames, TrialWriter, WriterOpti
 use crate::io::MarkerFile;
 use crate::kinematics::backend::BatchBackend;
 use crate::pipeline::convention::{conform_trial, decide_conventions, Conform, InputOptions};
-use crate::pipeline::frames::{FileFrames, TrialFrames};
+use crate::pipeline::file_frames::FileFrames;
+use crate::pipeline::frames::TrialFrames;
 use crate::pipeline::stats::P50P90;
 use crate::pipeline::stream::{solve_trials_streaming, TrialStream};
 use crate::pipeline::trial::SinkError;

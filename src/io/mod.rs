@@ -90,10 +90,40 @@ pub fn markers_from_arrays(
     Ok(t)
 }
 
+/// Coordinates beyond this (m, in the file's own declared units) are masked as the file is read,
+/// before units and up axis are looked at: implausible in any unit a lab file may really be in
+/// (a millimetre file declared as metres stays below 1e4).
+pub const ABSURD_COORDINATE_M: f64 = 1e6;
+
+/// Masks (sets to NaN, a gap) every marker sample with a coordinate that is not finite or is
+/// beyond `limit_m` (in the trial's units); returns a warning saying how many, or `None` when
+/// none were.
+pub fn mask_beyond(trial: &mut MarkerTrial, limit_m: f64) -> Option<String> {
+    let mut masked = 0usize;
+    let mut nonfinite = 0usize;
+    for p in trial.positions.chunks_exact_mut(3) {
+        if p.iter().all(|v| v.is_nan()) {
+            continue;
+        }
+        let bad_value = p.iter().any(|v| !v.is_finite());
+        if bad_value || p.iter().any(|v| v.abs() > limit_m) {
+            p.fill(f64::NAN);
+            masked += 1;
+            nonfinite += bad_value as usize;
+        }
+    }
+    (masked > 0).then(|| {
+        format!(
+            "{masked} marker samples masked as gaps: {nonfinite} not finite, {} beyond {limit_m} m",
+            masked - nonfinite
+        )
+    })
+}
+
 /// Absurd values (whatever the units) are gaps before anything looks at the data (with a
 /// warning saying how many).
 fn mask_absurd(t: &mut MarkerTrial) {
-    if let Some(w) = crate::pipeline::verdict::mask_beyond(t, crate::pipeline::verdict::ABSURD_COORDINATE_M) {
+    if let Some(w) = mask_beyond(t, ABSURD_COORDINATE_M) {
         t.warnings.push(w);
     }
 }

@@ -67,7 +67,7 @@ impl MarkerFile {
             },
             ..MarkerTrial::default()
         };
-        crate::pipeline::verdict::mask_beyond(&mut t, crate::pipeline::verdict::ABSURD_COORDINATE_M);
+        super::mask_beyond(&mut t, super::ABSURD_COORDINATE_M);
         Ok(t.positions)
     }
 }

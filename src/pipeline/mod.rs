@@ -8,6 +8,7 @@ pub mod continuity;
 pub mod convention;
 pub mod device;
 pub mod export;
+pub mod file_frames;
 pub mod frames;
 pub mod ik_tasks;
 pub mod joint_centres;

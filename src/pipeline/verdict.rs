@@ -15,39 +15,14 @@ pub const MAX_COORDINATE_M: f64 = 1000.0;
 /// iteration cap.
 pub const SUSPECT_CAP_FRACTION: f64 = 0.5;
 
-/// Coordinates beyond this (m, in the file's own declared units) are masked as the file is read,
-/// before units and up axis are looked at: implausible in any unit a lab file may really be in
-/// (a millimetre file declared as metres stays below 1e4).
-pub const ABSURD_COORDINATE_M: f64 = 1e6;
+// Masking beyond a limit is the readers' (`crate::io`): re-exported for the pipeline's callers.
+pub use crate::io::{mask_beyond, ABSURD_COORDINATE_M};
 
 /// Masks (sets to NaN, a gap) every marker sample with a coordinate that is not finite or is
 /// beyond [`MAX_COORDINATE_M`] (the trial in the model's units); returns a warning saying how
 /// many, or `None` when none were.
 pub fn mask_implausible(trial: &mut MarkerTrial) -> Option<String> {
     mask_beyond(trial, MAX_COORDINATE_M)
-}
-
-/// As [`mask_implausible`] with the limit `limit_m`.
-pub fn mask_beyond(trial: &mut MarkerTrial, limit_m: f64) -> Option<String> {
-    let mut masked = 0usize;
-    let mut nonfinite = 0usize;
-    for p in trial.positions.chunks_exact_mut(3) {
-        if p.iter().all(|v| v.is_nan()) {
-            continue;
-        }
-        let bad_value = p.iter().any(|v| !v.is_finite());
-        if bad_value || p.iter().any(|v| v.abs() > limit_m) {
-            p.fill(f64::NAN);
-            masked += 1;
-            nonfinite += bad_value as usize;
-        }
-    }
-    (masked > 0).then(|| {
-        format!(
-            "{masked} marker samples masked as gaps: {nonfinite} not finite, {} beyond {limit_m} m",
-            masked - nonfinite
-        )
-    })
 }
 
 /// Frames of `trial` with at least `min_markers` markers observed that the solver uses
