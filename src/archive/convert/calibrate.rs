@@ -1,6 +1,7 @@
 //! Stage 2 of a conversion, per subject: set up (model, the dataset's settings, what C3D files
 //! say of the subject), screen and calibrate on its static and motion trials as `smocap solve`
-//! does, and keep what the solve and write stages need ([`Calibrated`]).
+//! does, and keep what the solve and write stages need ([`Calibrated`], and the motion trials
+//! read whole for it: [`Held`]).
 
 use super::ConvertOptions;
 use crate::archive::config::Dataset;
@@ -9,7 +10,14 @@ use crate::archive::trial_job::{open_for, Calibrated};
 use crate::pipeline::convention::InputOptions;
 use crate::pipeline::frames::TrialFrames;
 use crate::pipeline::subject::prepare_subject;
+use std::collections::BTreeMap;
 use std::path::Path;
+
+/// The subject's motion trials read, screened and held whole for calibration, by trial path
+/// (`rel`): the solve takes them from here rather than reading and screening them again (the
+/// same [`open_for`] with the same context, so the same frames and label events). Trials read a
+/// window at a time are not kept (they are read again as they are solved).
+pub(super) type Held = BTreeMap<String, Box<dyn TrialFrames>>;
 
 /// Calibrates subject `g` of dataset `d`: its calibration and the dataset's input conventions,
 /// or why it could not be (every trial of the subject then fails with it).
@@ -18,7 +26,7 @@ pub(super) fn calibrate(
     g: &SubjectGroup,
     opt: &ConvertOptions,
     log: &(dyn Fn(&str) + Sync),
-) -> Result<(Calibrated, InputOptions), String> {
+) -> Result<(Calibrated, InputOptions, Held), String> {
     let mut files = d.subject_files(g.static_trial.clone());
     match d.subject_info(&g.subject) {
         Ok(info) => files.subject = info,
@@ -48,7 +56,8 @@ pub(super) fn calibrate(
     }
     let input = d.input_options();
     // Calibrate as `solve` does: the static trial (when there is one) and the motion trials whose
-    // markers match the model's, together (read for calibration, then again one at a time).
+    // markers match the model's, together (read for calibration; those held whole are kept for
+    // the solve, the others are read again one at a time).
     let window = opt.window_frames;
     let statics: Vec<(String, Box<dyn TrialFrames>)> = match &sub.static_path {
         Some(p) => match open_for(d, &sub.ctx, p, &input, window) {
@@ -67,25 +76,29 @@ pub(super) fn calibrate(
         },
         None => Vec::new(),
     };
-    let motions: Vec<(String, Box<dyn TrialFrames>)> = g
+    let opened: Vec<(String, Box<dyn TrialFrames>)> = g
         .trials
         .iter()
         .filter_map(|t| open_for(d, &sub.ctx, &t.path, &input, window).ok().map(|m| (t.rel.clone(), m)))
+        .collect();
+    let motions: Vec<(&str, &dyn TrialFrames)> = opened
+        .iter()
         .filter(|(rel, m)| {
             crate::pipeline::trial::match_markers(&sub.ctx, rel, m.header())
                 .is_ok_and(|x| x.columns.iter().any(Option::is_some))
         })
+        .map(|(n, t)| (n.as_str(), t.as_ref()))
         .collect();
     let cal = if statics.is_empty() && motions.is_empty() {
         Err("no trial to calibrate on".to_string())
     } else {
         let s: Vec<(&str, &dyn TrialFrames)> = statics.iter().map(|(n, t)| (n.as_str(), t.as_ref())).collect();
-        let m: Vec<(&str, &dyn TrialFrames)> = motions.iter().map(|(n, t)| (n.as_str(), t.as_ref())).collect();
-        crate::pipeline::subject::calibrate_placed_with(&sub.ctx, &s, &m)
+        crate::pipeline::subject::calibrate_placed_with(&sub.ctx, &s, &motions)
             .map_err(|e| format!("calibration failed: {e}"))
     };
     drop((statics, motions));
     let (calibration, placed) = cal?;
+    let held: Held = opened.into_iter().filter(|(_, t)| t.window_frames() == usize::MAX).collect();
     let ctx = placed.as_ref().unwrap_or(&sub.ctx);
     let source = d.model.as_ref().filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("osim")));
     let text = source.and_then(|p| std::fs::read_to_string(p).ok());
@@ -104,5 +117,5 @@ pub(super) fn calibrate(
     for w in &suspect {
         log(&format!("warning: {}/{}: suspect calibration: {w}", d.name, g.subject));
     }
-    Ok((Calibrated { base: sub.ctx, placed, calibration, settings_json, scaled_model, suspect }, input))
+    Ok((Calibrated { base: sub.ctx, placed, calibration, settings_json, scaled_model, suspect }, input, held))
 }

@@ -206,9 +206,9 @@ fn subject(
     };
     progress.inspect(|p| p.calibrating());
     let calibrated = calibrate::calibrate(d, g, opt, log);
-    let seconds = calibrated.as_ref().map_or(0.0, |(c, _)| c.calibration.seconds);
+    let seconds = calibrated.as_ref().map_or(0.0, |(c, ..)| c.calibration.seconds);
     progress.inspect(|p| p.calibrated(seconds));
-    let (cal, input) = match calibrated {
+    let (cal, input, mut held) = match calibrated {
         Ok(c) => c,
         Err(why) => return ([outcomes, fail_all(why)].concat(), None),
     };
@@ -218,7 +218,9 @@ fn subject(
         seconds: cal.calibration.seconds,
         stages: cal.calibration.stages.clone(),
     };
-    match solve::solve_all(d, g, &todo, &input, &cal, opt, report, log) {
+    // Only the trials still to convert are kept (resuming, the done ones were read to calibrate).
+    held.retain(|rel, _| todo.iter().any(|(t, ..)| &t.rel == rel));
+    match solve::solve_all(d, g, &todo, &input, &held, &cal, opt, report, log) {
         Ok(solved) => ([outcomes, solved].concat(), Some(cost)),
         Err(why) => ([outcomes, fail_all(why)].concat(), Some(cost)),
     }

@@ -2,6 +2,7 @@
 //! trial on the CPU (trials in parallel on the run's pool), or in batches through one backend
 //! ([`batched`]: a device, or the CPU with `lanes` set).
 
+use super::calibrate::Held;
 use super::{failed, outcome, ConvertOptions, TrialOutcome, BATCH_HELD_FRAMES, BATCH_TRIALS};
 use crate::archive::config::Dataset;
 use crate::archive::discover::{SubjectGroup, TrialEntry};
@@ -22,6 +23,7 @@ pub(super) fn solve_all(
     g: &SubjectGroup,
     todo: &[super::plan::Todo<'_>],
     input: &InputOptions,
+    held: &Held,
     cal: &Calibrated,
     opt: &ConvertOptions,
     report: &(dyn Fn(&TrialOutcome) + Sync),
@@ -42,17 +44,17 @@ pub(super) fn solve_all(
         (Chosen::Cpu { .. }, None) => todo
             .par_iter()
             .map(|(t, out, hash)| {
-                let o = solve_one(d, g, t, out, hash, input, cal, opt);
+                let o = solve_one(d, g, t, out, hash, input, held, cal, opt);
                 report(&o);
                 o
             })
             .collect(),
-        (Chosen::Cpu { .. }, Some(lanes)) => batched(d, g, todo, input, cal, opt, None, lanes, report),
+        (Chosen::Cpu { .. }, Some(lanes)) => batched(d, g, todo, input, held, cal, opt, None, lanes, report),
         (Chosen::Wgpu(mut b), lanes) => {
             let device = b.device();
             let lanes = lanes.unwrap_or(4096);
             let backend = Some((b.as_mut() as &mut dyn BatchBackend, device.as_str()));
-            batched(d, g, todo, input, cal, opt, backend, lanes, report)
+            batched(d, g, todo, input, held, cal, opt, backend, lanes, report)
         }
     };
     Ok(solved)
@@ -88,6 +90,7 @@ fn batched(
     g: &SubjectGroup,
     todo: &[(&TrialEntry, PathBuf, String)],
     input: &InputOptions,
+    held: &Held,
     cal: &Calibrated,
     opt: &ConvertOptions,
     mut backend: Option<(&mut dyn BatchBackend, &str)>,
@@ -104,9 +107,9 @@ fn batched(
     for (i0, i1) in batches(&frames, lanes, opt.window_frames) {
         let mut opened = Vec::new();
         for (t, out, hash) in &todo[i0..i1] {
-            match open_for(d, &cal.base, &t.path, input, opt.window_frames) {
+            match frames_of(d, t, input, held, cal, opt) {
                 Ok(trial) => {
-                    let run = run_info(d, g, t, hash, cal, trial.as_ref(), opt, (name, device));
+                    let run = run_info(d, g, t, hash, cal, trial.get(), opt, (name, device));
                     opened.push((*t, out, trial, run));
                 }
                 Err(e) => {
@@ -118,7 +121,7 @@ fn batched(
         }
         let jobs: Vec<TrialJob<'_>> = opened
             .iter()
-            .map(|(t, out, trial, run)| TrialJob { out: out.as_path(), name: &t.rel, trial: trial.as_ref(), run })
+            .map(|(t, out, trial, run)| TrialJob { out: out.as_path(), name: &t.rel, trial: trial.get(), run })
             .collect();
         let solver = Solver { threads: opt.jobs, lanes, backend: backend.as_mut().map(|(b, _)| &mut **b as _) };
         let progress = opt.progress.as_deref().map(|p| &p.frames_done);
@@ -156,6 +159,37 @@ fn trial_outcome(
     }
 }
 
+/// A trial's frames for the solve: held from calibration, or read now.
+enum Frames<'h> {
+    Held(&'h dyn TrialFrames),
+    Read(Box<dyn TrialFrames>),
+}
+
+impl Frames<'_> {
+    fn get(&self) -> &dyn TrialFrames {
+        match self {
+            Frames::Held(t) => *t,
+            Frames::Read(t) => t.as_ref(),
+        }
+    }
+}
+
+/// Trial `t`'s frames: those calibration read and held whole (`held`, read and screened with the
+/// same context: the same frames and label events), else read and screened now.
+fn frames_of<'h>(
+    d: &Dataset,
+    t: &TrialEntry,
+    input: &InputOptions,
+    held: &'h Held,
+    cal: &Calibrated,
+    opt: &ConvertOptions,
+) -> Result<Frames<'h>, String> {
+    match held.get(&t.rel) {
+        Some(h) => Ok(Frames::Held(h.as_ref())),
+        None => open_for(d, &cal.base, &t.path, input, opt.window_frames).map(Frames::Read),
+    }
+}
+
 /// Reads one trial, solves it (one lane, the CPU backend) and streams it to its MCAP file.
 #[allow(clippy::too_many_arguments)]
 fn solve_one(
@@ -165,16 +199,17 @@ fn solve_one(
     out: &Path,
     hash: &str,
     input: &InputOptions,
+    held: &Held,
     cal: &Calibrated,
     opt: &ConvertOptions,
 ) -> TrialOutcome {
     let (writer, progress) = (&opt.writer, opt.progress.as_deref());
-    let trial = match open_for(d, &cal.base, &t.path, input, opt.window_frames) {
+    let trial = match frames_of(d, t, input, held, cal, opt) {
         Ok(m) => m,
         Err(e) => return failed(d, g, t, out, e),
     };
-    let run = run_info(d, g, t, hash, cal, trial.as_ref(), opt, ("cpu", "cpu"));
-    let r = solve_and_write(out, &t.rel, trial.as_ref(), cal, &run, writer, progress.map(|p| &p.frames_done));
+    let run = run_info(d, g, t, hash, cal, trial.get(), opt, ("cpu", "cpu"));
+    let r = solve_and_write(out, &t.rel, trial.get(), cal, &run, writer, progress.map(|p| &p.frames_done));
     trial_outcome(d, g, t, out, r, "cpu")
 }
 
