@@ -39,6 +39,11 @@ pub(crate) struct Screen {
     /// this (m, median over the partners) has stepped away from its body.
     step_threshold: f64,
     scratch: Vec<f64>,
+    /// Per pair: its distance (m) in the frame being screened (or in `work` in the step test),
+    /// computed once per frame and shared by every marker of the pair.
+    dist: Vec<f64>,
+    /// Per pair: its excess ([`Self::excess`]) in the frame being screened.
+    pair_excess: Vec<f64>,
     pub(crate) findings: Findings,
 }
 
@@ -79,6 +84,8 @@ impl Screen {
             local: vec![f64::NAN; np],
             step_threshold: step_m,
             scratch: Vec::with_capacity(nm),
+            dist: vec![f64::NAN; np],
+            pair_excess: vec![f64::NAN; np],
             findings: Findings::default(),
         }
     }
@@ -120,6 +127,55 @@ impl Screen {
         self.partners[m].iter().map(|&k| self.excess(k, x)).filter(|e| !e.is_nan()).sum()
     }
 
+    /// Every pair's distance and excess in `x`, into `self.dist` and `self.pair_excess` (the
+    /// same values as [`Self::excess`] gives, each pair computed once rather than once per
+    /// marker and once more for [`Self::touched`]).
+    fn measure(&mut self, x: &[[f64; 3]]) {
+        for (k, p) in self.pairs.iter().enumerate() {
+            let d = distance(&x[p.a], &x[p.b]);
+            self.dist[k] = d;
+            self.pair_excess[k] = ((d - p.reference).abs() - p.tolerance).max(0.0);
+        }
+    }
+
+    /// [`Self::flag`] with `record`, and then [`Self::touched`], on the frame `x` just measured
+    /// ([`Self::measure`]): the same scores, flags and touched markers from the pairs' excesses.
+    fn flag_measured(&mut self, x: &[[f64; 3]]) {
+        let mut flagged = std::mem::take(&mut self.flagged);
+        let mut s = std::mem::take(&mut self.scratch);
+        flagged.clear();
+        for m in 0..x.len() {
+            let score = if self.partners[m].is_empty() || !x[m][0].is_finite() {
+                0.0
+            } else {
+                s.clear();
+                s.extend(self.partners[m].iter().map(|&k| self.pair_excess[k]).filter(|e| !e.is_nan()));
+                if s.is_empty() {
+                    0.0
+                } else {
+                    median(&mut s)
+                }
+            };
+            self.scores[m] = score;
+            if score > self.threshold {
+                flagged.push(m);
+            }
+        }
+        self.scratch = s;
+        self.flagged = flagged;
+        let mut t = std::mem::take(&mut self.considered);
+        t.clear();
+        for (k, p) in self.pairs.iter().enumerate() {
+            if self.pair_excess[k] > self.threshold {
+                t.push(p.a);
+                t.push(p.b);
+            }
+        }
+        t.sort_unstable();
+        t.dedup();
+        self.considered = t;
+    }
+
     /// Markers whose score in `x` is above the threshold, into `self.flagged`; with `record`,
     /// every marker's score into `self.scores`.
     fn flag(&mut self, x: &[[f64; 3]], record: bool) {
@@ -159,12 +215,13 @@ impl Screen {
         self.findings.swaps.clear();
         self.findings.masks.clear();
         std::mem::swap(&mut self.scores, &mut self.previous);
-        self.flag(x, true);
-        self.touched(x);
+        self.measure(x);
+        self.flag_measured(x);
         let mut work = std::mem::take(&mut self.work);
         work.copy_from_slice(x);
         if self.considered.is_empty() {
-            self.steps(&mut work);
+            // `work` is `x`, whose distances are measured.
+            self.steps(&mut work, true);
             self.last.copy_from_slice(&work);
             self.work = work;
             return;
@@ -243,14 +300,15 @@ impl Screen {
             self.findings.masks.push((pick.0, score));
             work[pick.0] = [f64::NAN; 3];
         }
-        self.steps(&mut work);
+        self.steps(&mut work, false);
         self.last.copy_from_slice(&work);
         self.work = work;
     }
 
-    /// Marker `m`'s step in `x`: the median, over its partners observed now and with a kept
-    /// distance, of how far their distance is from that (0 with none).
-    fn step(&mut self, m: usize, x: &[[f64; 3]]) -> f64 {
+    /// Marker `m`'s step in `x` (whose pair distances are in `self.dist`): the median, over its
+    /// partners observed now and with a kept distance, of how far their distance is from that
+    /// (0 with none).
+    fn step(&self, m: usize, x: &[[f64; 3]]) -> f64 {
         if !x[m][0].is_finite() {
             return 0.0;
         }
@@ -258,8 +316,7 @@ impl Screen {
         // one of them (masked first, as the larger step).
         let (mut first, mut second) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
         for &k in &self.partners[m] {
-            let p = &self.pairs[k];
-            let c = (distance(&x[p.a], &x[p.b]) - self.local[k]).abs();
+            let c = (self.dist[k] - self.local[k]).abs();
             if !c.is_finite() {
                 continue;
             }
@@ -276,9 +333,17 @@ impl Screen {
     /// changed abruptly since they were last kept (a jump in any direction changes them by a
     /// large part of its size, while the trial-wide test above needs them far from the trial's
     /// distances beyond their spread) is masked, the largest step first; then the distances of
-    /// the pairs kept in this frame become the next frame's references.
-    fn steps(&mut self, work: &mut [[f64; 3]]) {
+    /// the pairs kept in this frame become the next frame's references. `measured`: the pairs'
+    /// distances in `work` are in `self.dist` already.
+    fn steps(&mut self, work: &mut [[f64; 3]], measured: bool) {
+        let mut fresh = measured;
         for _ in 0..6 {
+            if !fresh {
+                for (k, p) in self.pairs.iter().enumerate() {
+                    self.dist[k] = distance(&work[p.a], &work[p.b]);
+                }
+                fresh = true;
+            }
             let mut pick: Option<(usize, f64)> = None;
             for m in 0..work.len() {
                 if self.partners[m].is_empty() {
@@ -292,9 +357,10 @@ impl Screen {
             let Some((m, s)) = pick else { break };
             self.findings.masks.push((m, s));
             work[m] = [f64::NAN; 3];
+            fresh = false;
         }
         for (k, p) in self.pairs.iter().enumerate() {
-            let d = distance(&work[p.a], &work[p.b]);
+            let d = if fresh { self.dist[k] } else { distance(&work[p.a], &work[p.b]) };
             if d.is_finite() {
                 self.local[k] = d;
             }
