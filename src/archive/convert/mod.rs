@@ -182,9 +182,10 @@ fn failed(d: &Dataset, g: &SubjectGroup, t: &TrialEntry, out: &Path, why: String
 }
 
 /// Converts one subject's trials (those not already done when resuming): calibrated once, then
-/// solved and written. Trials are read one at a time as they are solved (a subject without a
-/// static trial first reads all its motion trials, done ones included, to calibrate on them as an
-/// uninterrupted run would).
+/// solved and written. Calibration reads all its motion trials (done ones included, to calibrate
+/// on them as an uninterrupted run would); those held whole and still to convert are kept for the
+/// solve, until the subject's last trial is solved; the others are read again one at a time as
+/// they are solved.
 fn subject(
     d: &Dataset,
     g: &SubjectGroup,
