@@ -165,13 +165,18 @@ pub fn calibrate_placed(
     inputs: &[(&str, &MarkerTrial)],
 ) -> Result<(Calibration, Option<Context>), SetupError> {
     let c = calibrate_subject(ctx, inputs)?;
-    let placed = c
-        .marker_offsets
+    let placed = placed_context(ctx, &c)?;
+    Ok((c, placed))
+}
+
+/// The context with the markers where calibration `c` placed them (and its hips moved with them),
+/// when marker placement moved any.
+fn placed_context(ctx: &Context, c: &Calibration) -> Result<Option<Context>, SetupError> {
+    Ok(c.marker_offsets
         .as_ref()
         .map(|o| ctx.with_marker_offsets(o))
         .transpose()?
-        .map(|p| p.with_joint_moves(&c.joint_moves));
-    Ok((c, placed))
+        .map(|p| p.with_joint_moves(&c.joint_moves)))
 }
 
 /// [`calibrate_placed`] on the subject's static trials and motion trials together
@@ -182,11 +187,6 @@ pub fn calibrate_placed_with<T: super::frames::TrialFrames + ?Sized>(
     motions: &[(&str, &T)],
 ) -> Result<(Calibration, Option<Context>), SetupError> {
     let c = super::calibration::calibrate_subject_with(ctx, statics, motions)?;
-    let placed = c
-        .marker_offsets
-        .as_ref()
-        .map(|o| ctx.with_marker_offsets(o))
-        .transpose()?
-        .map(|p| p.with_joint_moves(&c.joint_moves));
+    let placed = placed_context(ctx, &c)?;
     Ok((c, placed))
 }

@@ -138,9 +138,10 @@ impl Screen {
         }
     }
 
-    /// [`Self::flag`] with `record`, and then [`Self::touched`], on the frame `x` just measured
-    /// ([`Self::measure`]): the same scores, flags and touched markers from the pairs' excesses.
-    fn flag_measured(&mut self, x: &[[f64; 3]]) {
+    /// On the frame `x` just measured ([`Self::measure`]): the markers whose score is above the
+    /// threshold into `self.flagged` (with `record`, every marker's score into `self.scores`),
+    /// and the markers of the pairs whose excess is above it into `self.considered` (sorted).
+    fn flag_measured(&mut self, x: &[[f64; 3]], record: bool) {
         let mut flagged = std::mem::take(&mut self.flagged);
         let mut s = std::mem::take(&mut self.scratch);
         flagged.clear();
@@ -156,7 +157,9 @@ impl Screen {
                     median(&mut s)
                 }
             };
-            self.scores[m] = score;
+            if record {
+                self.scores[m] = score;
+            }
             if score > self.threshold {
                 flagged.push(m);
             }
@@ -176,39 +179,6 @@ impl Screen {
         self.considered = t;
     }
 
-    /// Markers whose score in `x` is above the threshold, into `self.flagged`; with `record`,
-    /// every marker's score into `self.scores`.
-    fn flag(&mut self, x: &[[f64; 3]], record: bool) {
-        let mut flagged = std::mem::take(&mut self.flagged);
-        flagged.clear();
-        for m in 0..x.len() {
-            let s = if self.partners[m].is_empty() { 0.0 } else { self.score(m, x) };
-            if record {
-                self.scores[m] = s;
-            }
-            if s > self.threshold {
-                flagged.push(m);
-            }
-        }
-        self.flagged = flagged;
-    }
-
-    /// The markers of the pairs whose excess in `x` is above the threshold, into
-    /// `self.considered` (sorted).
-    fn touched(&mut self, x: &[[f64; 3]]) {
-        let mut t = std::mem::take(&mut self.considered);
-        t.clear();
-        for k in 0..self.pairs.len() {
-            if self.excess(k, x) > self.threshold {
-                t.push(self.pairs[k].a);
-                t.push(self.pairs[k].b);
-            }
-        }
-        t.sort_unstable();
-        t.dedup();
-        self.considered = t;
-    }
-
     /// Screens frame `x` (model-marker order, NaN where missing): fills [`Self::findings`], and
     /// every marker's score in [`Self::scores`] (the previous frame's in [`Self::previous`]).
     pub(crate) fn frame(&mut self, x: &[[f64; 3]]) {
@@ -216,7 +186,7 @@ impl Screen {
         self.findings.masks.clear();
         std::mem::swap(&mut self.scores, &mut self.previous);
         self.measure(x);
-        self.flag_measured(x);
+        self.flag_measured(x, true);
         let mut work = std::mem::take(&mut self.work);
         work.copy_from_slice(x);
         if self.considered.is_empty() {
@@ -277,7 +247,8 @@ impl Screen {
             let Some((a, b, _, before, after)) = best else { break };
             work.swap(a, b);
             self.findings.swaps.push((a, b, before, after));
-            self.touched(&work);
+            self.measure(&work);
+            self.flag_measured(&work, false);
             if self.considered.is_empty() {
                 break;
             }
@@ -285,7 +256,8 @@ impl Screen {
         // What no exchange explains: mask the marker that carries the most misfit, while one
         // scores above the threshold.
         for _ in 0..6 {
-            self.flag(&work, false);
+            self.measure(&work);
+            self.flag_measured(&work, false);
             if self.flagged.is_empty() {
                 break;
             }
