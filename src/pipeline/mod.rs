@@ -10,6 +10,7 @@ pub mod device;
 pub mod export;
 pub mod file_frames;
 pub mod frames;
+pub mod functional_hips;
 pub mod ik_tasks;
 pub mod joint_centres;
 pub mod label_qc;
