@@ -56,8 +56,8 @@ fn a_subject_turning_twice_gets_a_continuous_pelvis_rotation_in_the_mot() {
 /// pre-solve pass ([`resolve_flips`]) and comes back to the pose the trial was solved with.
 #[test]
 fn a_frame_with_a_leg_half_a_turn_round_is_solved_again_from_its_neighbour() {
-    use smocap::model::proxy::ProxyKind;
-    use smocap::pipeline::lanes::{resolve_flips, FrameObservations, FrameResult, TrialInputs};
+    use smocap::pipeline::lanes::{resolve_flips, FrameObservations, FrameResult};
+    use smocap::pipeline::stream::SubjectInputs;
     let ctx = Context::shipped().unwrap();
     let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 40, seed: 6, ..SynthOptions::default() });
     let cal = calibrate_subject(&ctx, &[("walk", &s.trial)]).unwrap();
@@ -65,35 +65,9 @@ fn a_frame_with_a_leg_half_a_turn_round_is_solved_again_from_its_neighbour() {
     // The trial's inputs as the streaming solve builds them.
     let pinned = ctx.pinned_to(&cal);
     let (eval, settings) = (pinned.evaluator(), &pinned.settings);
-    let reference = pinned.proxy.state(&cal.proxies);
-    let mut tracking = vec![0.0; pinned.model.ny()];
-    for t in &pinned.proxy.terms {
-        tracking[t.y_index] = if pinned.proxy.proxies[t.proxy].kind == ProxyKind::Scale {
-            settings.scale_tracking_weight
-        } else {
-            settings.pose_prior_weight
-        };
-    }
-    let (targets, weights) = pinned.coordinate_tracking();
-    let all: Vec<f64> = tracking.iter().zip(&weights).map(|(a, b)| a + b).collect();
-    let mut neutral = pinned.proxy.default_proxies();
-    for (k, p) in pinned.proxy.proxies.iter().enumerate() {
-        if p.kind == ProxyKind::Scale {
-            neutral[k] = cal.proxies[k];
-        }
-    }
+    let subject = SubjectInputs::new(&pinned, &cal);
     let m = smocap::pipeline::trial::match_markers(&pinned, "walk", &s.trial).unwrap();
-    let inputs = TrialInputs {
-        observed: FrameObservations { trial: &s.trial, map: &m.columns },
-        marker_weights: &pinned.marker_weights,
-        reference: &reference,
-        tracking_weights: &tracking,
-        coordinate_targets: &targets,
-        coordinate_weights: &weights,
-        tracking_weights_all: &all,
-        neutral: &neutral,
-        calibrated: &cal.proxies,
-    };
+    let inputs = subject.inputs(FrameObservations { trial: &s.trial, map: &m.columns });
     let mut results: Vec<Option<FrameResult>> =
         r.proxies.iter().zip(&r.stats).map(|(p, st)| Some((p.clone(), *st, 0.0))).collect();
     let names: Vec<&str> = pinned.proxy.proxies.iter().map(|p| p.name.as_str()).collect();

@@ -234,42 +234,14 @@ pub fn solve_trials_streaming(
         return results.into_iter().map(|r| r.expect("one result per trial")).collect();
     }
     let eval = ctx.evaluator();
-    let ny = ctx.model.ny();
 
-    // Tracking: scales toward the calibration, coordinates weakly toward the warm start.
-    let y_cal = ctx.proxy.state(&calibration.proxies);
-    let mut track_w = vec![0.0; ny];
-    for t in &ctx.proxy.terms {
-        let kind = ctx.proxy.proxies[t.proxy].kind;
-        track_w[t.y_index] =
-            if kind == ProxyKind::Scale { settings.scale_tracking_weight } else { settings.pose_prior_weight };
-    }
-    // Coordinate targets fold into the pose prior's reference (same objective up to a constant).
-    let (coord_ref, coord_w) = ctx.coordinate_tracking();
-    let track_w_all: Vec<f64> = track_w.iter().zip(&coord_w).map(|(a, b)| a + b).collect();
-
-    let mut neutral = ctx.proxy.default_proxies();
-    for (k, px) in ctx.proxy.proxies.iter().enumerate() {
-        if px.kind == ProxyKind::Scale {
-            neutral[k] = calibration.proxies[k];
-        }
-    }
     // Segments, one lane each at a time: fixed by the frame count alone, so that the result does
     // not depend on the lane or thread count. Consecutive segments are read together, as many as
     // fit in a window of the trial (all of them when it is held whole); each segment is solved
     // as it would be in the whole trial, so the result does not depend on the window either.
     let threads = threads.max(1);
     let lanes = lanes.max(1);
-    let shared = Shared {
-        marker_weights: &ctx.marker_weights,
-        reference: &y_cal,
-        tracking_weights: &track_w,
-        coordinate_targets: &coord_ref,
-        coordinate_weights: &coord_w,
-        tracking_weights_all: &track_w_all,
-        neutral: &neutral,
-        calibrated: &calibration.proxies,
-    };
+    let shared = SubjectInputs::new(ctx, calibration);
     let base = &shared;
     // One thread and one lane run on the caller's thread: no pool to start, and no waiting on
     // one during which a caller's rayon worker would take up other work (e.g. another trial).
@@ -365,29 +337,62 @@ pub fn solve_trials_streaming(
 }
 
 /// What every trial of a subject shares in its [`TrialInputs`].
-struct Shared<'a> {
+/// What every frame of a subject's trials is solved against, on `ctx` pinned to its calibration:
+/// tracking (scales toward the calibration, coordinates weakly toward the warm start, coordinate
+/// targets folded into the pose prior's reference: the same objective up to a constant), the
+/// cold-start pose, the calibration's proxies.
+pub struct SubjectInputs<'a> {
     marker_weights: &'a [f64],
-    reference: &'a [f64],
-    tracking_weights: &'a [f64],
-    coordinate_targets: &'a [f64],
-    coordinate_weights: &'a [f64],
-    tracking_weights_all: &'a [f64],
-    neutral: &'a [f64],
+    reference: Vec<f64>,
+    tracking_weights: Vec<f64>,
+    coordinate_targets: Vec<f64>,
+    coordinate_weights: Vec<f64>,
+    tracking_weights_all: Vec<f64>,
+    /// Neutral pose at the calibrated morphology.
+    neutral: Vec<f64>,
     calibrated: &'a [f64],
 }
 
-impl Shared<'_> {
+impl<'a> SubjectInputs<'a> {
+    pub fn new(ctx: &'a Context, calibration: &'a Calibration) -> Self {
+        let settings = &ctx.settings;
+        let mut tracking_weights = vec![0.0; ctx.model.ny()];
+        for t in &ctx.proxy.terms {
+            let kind = ctx.proxy.proxies[t.proxy].kind;
+            tracking_weights[t.y_index] =
+                if kind == ProxyKind::Scale { settings.scale_tracking_weight } else { settings.pose_prior_weight };
+        }
+        let (coordinate_targets, coordinate_weights) = ctx.coordinate_tracking();
+        let tracking_weights_all = tracking_weights.iter().zip(&coordinate_weights).map(|(a, b)| a + b).collect();
+        let mut neutral = ctx.proxy.default_proxies();
+        for (k, px) in ctx.proxy.proxies.iter().enumerate() {
+            if px.kind == ProxyKind::Scale {
+                neutral[k] = calibration.proxies[k];
+            }
+        }
+        SubjectInputs {
+            marker_weights: &ctx.marker_weights,
+            reference: ctx.proxy.state(&calibration.proxies),
+            tracking_weights,
+            coordinate_targets,
+            coordinate_weights,
+            tracking_weights_all,
+            neutral,
+            calibrated: &calibration.proxies,
+        }
+    }
+
     /// The inputs of a trial (or a window of it) observed as `observed`.
-    fn inputs<'b>(&'b self, observed: FrameObservations<'b>) -> TrialInputs<'b> {
+    pub fn inputs<'b>(&'b self, observed: FrameObservations<'b>) -> TrialInputs<'b> {
         TrialInputs {
             observed,
             marker_weights: self.marker_weights,
-            reference: self.reference,
-            tracking_weights: self.tracking_weights,
-            coordinate_targets: self.coordinate_targets,
-            coordinate_weights: self.coordinate_weights,
-            tracking_weights_all: self.tracking_weights_all,
-            neutral: self.neutral,
+            reference: &self.reference,
+            tracking_weights: &self.tracking_weights,
+            coordinate_targets: &self.coordinate_targets,
+            coordinate_weights: &self.coordinate_weights,
+            tracking_weights_all: &self.tracking_weights_all,
+            neutral: &self.neutral,
             calibrated: self.calibrated,
         }
     }
@@ -435,7 +440,7 @@ fn presolve_pass(
     matched: &MarkerMatch,
     eval: &Evaluator<'_>,
     settings: &SolverSettings,
-    base: &Shared<'_>,
+    base: &SubjectInputs<'_>,
 ) -> Result<(), Stop> {
     let threshold = outlier_threshold_of(&job.held);
     for &(g0, g1) in &job.groups {
