@@ -176,6 +176,45 @@ fn plug_in_gait_waveforms_agree_and_standing_is_offset_as_walking() {
         let a = gait.get(&format!("ankle_angle_{s}")).unwrap().offset;
         assert!(a.abs() <= 8.0, "ankle_angle_{s}: offset {a:+.1}° (Plug-in Gait defines the foot its own way)");
     }
+    // The feet stand flat in the static trial (docs/CALIBRATION.md, "Feet flat"): where the heel
+    // and toe markers sit on the skin no longer pitches one foot against the other.
+    let (r, l) = (gait.get("ankle_angle_r").unwrap().offset, gait.get("ankle_angle_l").unwrap().offset);
+    assert!((r - l).abs() <= 3.0, "ankle_angle: offsets {r:+.1}° right, {l:+.1}° left");
+}
+
+#[test]
+fn plug_in_gait_static_feet_solve_level() {
+    let dir = shared("datasets/vicon_plugingait_flatfoot");
+    if !dir.exists() {
+        eprintln!("skipped: {} is absent", dir.display());
+        return;
+    }
+    let st = dir.join("PiG_Calibration3_FF.c3d");
+    let sub = prepare_subject(&SubjectFiles { static_trial: Some(st.clone()), ..Default::default() }).expect("subject");
+    let ts = read_trial(&sub.ctx, &st, &InputOptions::default()).expect("trial").0;
+    let (cal, placed) = calibrate_placed_with(&sub.ctx, &[("static", &ts)], &[]).expect("calibrates");
+    assert_eq!(cal.posture.feet.len(), 2, "{:?}", cal.posture);
+    let ctx = placed.expect("registered");
+    // The static trial solved on the markers alone, as every trial is: both feet level.
+    let r = solve_trial(&ctx, "static", &ts, &cal, 2).expect("solves");
+    let up = ctx.up.expect("the shipped model has gravity");
+    for foot in smocap::pipeline::feet_flat::level_targets(&ctx.model, &ctx.proxy, &up, &r.proxies) {
+        let name = &ctx.model.bodies[foot.body].name;
+        eprintln!("{name}: pitched {:+.2}° standing", foot.tilt_deg);
+        assert!(foot.tilt_deg.abs() < 1.0, "{name} pitched {:+.2}° standing", foot.tilt_deg);
+    }
+    // Without it the markers pitch the feet apart.
+    let mut off = sub.ctx.clone();
+    off.settings.static_feet_flat_sd_deg = 0.0;
+    let (cal, placed) = calibrate_placed_with(&off, &[("static", &ts)], &[]).expect("calibrates");
+    let ctx = placed.expect("registered");
+    let r = solve_trial(&ctx, "static", &ts, &cal, 2).expect("solves");
+    let tilts: Vec<f64> = smocap::pipeline::feet_flat::level_targets(&ctx.model, &ctx.proxy, &up, &r.proxies)
+        .iter()
+        .map(|f| f.tilt_deg)
+        .collect();
+    eprintln!("without: pitched {tilts:+.2?}");
+    assert!(cal.posture.feet.is_empty() && tilts.iter().any(|t| t.abs() > 1.0), "{tilts:?}");
 }
 
 #[test]

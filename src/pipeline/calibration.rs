@@ -407,7 +407,20 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
     let noise = if out.rmse_m.is_finite() { out.rmse_m.clamp(0.0005, 0.03) } else { settings.prior_noise_sd_m };
     let pri = priors(ctx, &scale, noise, slices.len())?;
     let terms = pri.all();
-    let stage1 = JointProblem { terms: &terms, ..stage1 };
+    // A static trial's feet rest on the floor: from here on its frames' feet are pulled toward
+    // level in the poses stage 1 found (docs/CALIBRATION.md, "Feet flat").
+    let statics_at: Vec<usize> = (0..kinds.len()).filter(|&i| kinds[i] == Kind::Static).collect();
+    let static_poses: Vec<Vec<f64>> = statics_at.iter().map(|&i| state.poses[i].clone()).collect();
+    let feet = feet_level(ctx, &posture, &static_poses);
+    let (flat_ref, flat_w) = match &feet {
+        Some((flat, _)) => flat.fold(&coord_ref, &coord_w),
+        None => (static_ref.clone(), static_w.clone()),
+    };
+    let refs: Vec<&[f64]> =
+        kinds.iter().map(|&k| if k == Kind::Static { flat_ref.as_slice() } else { tracking_of(k).0 }).collect();
+    let tracking_w: Vec<&[f64]> =
+        kinds.iter().map(|&k| if k == Kind::Static { flat_w.as_slice() } else { tracking_of(k).1 }).collect();
+    let stage1 = JointProblem { terms: &terms, tracking_refs: &refs, tracking_weights: &tracking_w, ..stage1 };
     if !registering {
         let t = std::time::Instant::now();
         out = stage1.solve(&mut state);
@@ -456,6 +469,9 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
         stages.push(StageCost::new("registration", slices.len(), out.iterations, out.rejected, t));
         iterations += out.iterations;
         registered = reg.iter().filter(|r| **r).count();
+        if feet.is_some() {
+            place_feet_level(ctx, &classes, &seen, &statics_at, &slices, &mut state);
+        }
         offsets = Some(state.offsets.clone());
     } else if placing {
         let movable: Vec<bool> = ctx.model.markers.iter().map(|m| !m.fixed).collect();
@@ -468,6 +484,20 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
     let mut cal = finish(state, out, &p0, &ctx.proxy, offsets, registered, started);
     cal.static_frames = kinds.iter().filter(|k| **k == Kind::Static).count();
     cal.posture = super::plausibility::static_posture(ctx, &cal.frame_proxies[..cal.static_frames]);
+    if let Some((_, levels)) = &feet {
+        cal.posture.feet = levels
+            .iter()
+            .map(|l| crate::solve::prior::FootLevelReport {
+                body: ctx.model.bodies[l.body].name.clone(),
+                tilt_deg: l.tilt_deg,
+                targets: l
+                    .targets
+                    .iter()
+                    .map(|&(j, v)| (ctx.model.coordinates[j].name.clone(), v.to_degrees()))
+                    .collect(),
+            })
+            .collect();
+    }
     cal.registration_report = registration_report(ctx, &cal);
     cal.landmark_centres = landmark_centres;
     if settings.functional_hips != FunctionalHips::Off {
@@ -629,6 +659,46 @@ fn registration_priors(
     (OffsetPrior { reference: generic.to_vec(), weight }, LandmarkAnchor::new(model, generic, &anchored, anatomical))
 }
 
+/// Places each foot's landmarks where the static frames `statics_at` see them with the foot
+/// level (the registered poses with the foot's coordinates at the values that level it,
+/// [`super::feet_flat::level_targets`]), as OpenSim's MarkerPlacer places markers on the static
+/// pose and Plug-in Gait's "foot flat" defines the foot: a heel marker put higher on the skin
+/// than the toe marker then lies higher on the model's foot, instead of tilting it.
+fn place_feet_level(
+    ctx: &Context,
+    classes: &[MarkerClass],
+    seen: &[bool],
+    statics_at: &[usize],
+    slices: &[&[f64]],
+    state: &mut crate::solve::calibrate::JointState,
+) {
+    let (model, proxy) = (&ctx.model, &ctx.proxy);
+    let Some(up) = ctx.up else { return };
+    let poses: Vec<Vec<f64>> = statics_at.iter().map(|&i| state.poses[i].clone()).collect();
+    let levels = super::feet_flat::level_targets(model, proxy, &up, &poses);
+    let levelled: Vec<Vec<f64>> = poses
+        .iter()
+        .map(|p| {
+            let mut y = proxy.state(p);
+            for &(j, v) in levels.iter().flat_map(|l| &l.targets) {
+                y[j] = v;
+            }
+            proxy.proxies_from_state(&y, p)
+        })
+        .collect();
+    let frames: Vec<&[f64]> = statics_at.iter().map(|&i| slices[i]).collect();
+    let movable: Vec<bool> = (0..model.markers.len())
+        .map(|m| {
+            seen[m] && classes[m] == MarkerClass::Anatomical && levels.iter().any(|l| l.body == model.markers[m].body)
+        })
+        .collect();
+    for (m, placed) in place_markers(model, proxy, &frames, &levelled, &movable).into_iter().enumerate() {
+        if let Some(p) = placed {
+            state.offsets[m] = p;
+        }
+    }
+}
+
 /// Fails a trial whose marker cloud is far larger or smaller than the model's: the data's
 /// units are then almost certainly not what was read (millimetres read as metres: ×1000).
 fn units_check(
@@ -690,6 +760,31 @@ fn units_check(
             "its markers spread {r:.3e} times as far as the model's: the data look like {hint}; give the right --units"
         ),
     })
+}
+
+/// The static posture with each foot's coordinates pulled toward level in `static_poses`
+/// (`static_feet_flat_sd_deg`), and the levels found; `None` where it does not apply: no static
+/// frames, no feet, no up direction, the setting at 0, or an OpenSim Scale setup's static pose.
+fn feet_level(
+    ctx: &Context,
+    posture: &StaticPosture,
+    static_poses: &[Vec<f64>],
+) -> Option<(StaticPosture, Vec<super::feet_flat::FootLevel>)> {
+    let sd = ctx.settings.static_feet_flat_sd_deg.to_radians();
+    if sd <= 0.0 || static_poses.is_empty() || !ctx.static_posture_values.is_empty() {
+        return None;
+    }
+    let levels = super::feet_flat::level_targets(&ctx.model, &ctx.proxy, &ctx.up?, static_poses);
+    if levels.is_empty() {
+        return None;
+    }
+    let mut flat = posture.clone();
+    let w = (ctx.settings.prior_noise_sd_m / sd).powi(2);
+    for &(j, v) in levels.iter().flat_map(|l| &l.targets) {
+        flat.reference[j] = v;
+        flat.weights[j] = w;
+    }
+    Some((flat, levels))
 }
 
 #[cfg(test)]

@@ -8,6 +8,7 @@ pub mod continuity;
 pub mod convention;
 pub mod device;
 pub mod export;
+pub mod feet_flat;
 pub mod file_frames;
 pub mod frames;
 pub mod functional_hips;

@@ -454,6 +454,21 @@ pub struct StaticPostureReport {
     pub asymmetry: Vec<Asymmetry>,
     /// Why the posture is not a standing subject's (makes the calibration `suspect`).
     pub suspect: Vec<String>,
+    /// The feet levelled (`static_feet_flat_sd_deg`): each foot's tilt in the first poses and
+    /// the angles that level it. Empty where not applied.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub feet: Vec<FootLevelReport>,
+}
+
+/// One foot of a static trial levelled (degrees).
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct FootLevelReport {
+    /// The foot body.
+    pub body: String,
+    /// Its mean tilt from level in the static frames' first poses (deg).
+    pub tilt_deg: f64,
+    /// `(coordinate, value)` that level it, the static frames' targets (deg).
+    pub targets: Vec<(String, f64)>,
 }
 
 /// One marker's move by registration or placement (mm at the subject's scale).

@@ -199,6 +199,14 @@ pub struct SolverSettings {
     /// Default 5 (a standing subject's knees, hips and ankles lie within a few degrees of
     /// neutral); 0 disables it.
     pub static_posture_sd_deg: f64,
+    /// Standard deviation (degrees) of a static trial's feet about level: a standing subject's
+    /// soles rest on the floor, so each foot's coordinates below its shank (ankle, subtalar) are
+    /// pulled toward the values that level it in the frame's pose, instead of toward 0 (which
+    /// tilts the sole when the shank leans). Registration then places heel and toe markers at
+    /// the heights a flat foot gives them (Plug-in Gait's "foot flat" option). Default 2; 0
+    /// leaves the feet to the posture prior (a subject who cannot stand flat-footed). Not used
+    /// where an OpenSim Scale setup gives the static pose.
+    pub static_feet_flat_sd_deg: f64,
     /// A landmark (anatomical marker) that registration moved further than this (mm, at the
     /// subject's scale) makes the calibration `suspect`; half of it is a warning. Default 50:
     /// placement on a bony landmark errs by 10–20 mm, and a generic model's landmark sits up to
@@ -262,6 +270,7 @@ impl Default for SolverSettings {
             scale_prior_sd: 0.1,
             anisotropy_sd: 0.05,
             static_posture_sd_deg: 5.0,
+            static_feet_flat_sd_deg: 2.0,
             registration_suspect_mm: 50.0,
             functional_hips: FunctionalHips::default(),
             functional_hips_symmetric: true,

@@ -51,6 +51,11 @@ pub struct SubjectSpec {
     /// by a normal deviate of this standard deviation (deg). Default 0 (exactly neutral).
     #[serde(default)]
     pub static_posture_sd_deg: f64,
+    /// The static trial's feet rest flat on the floor: each foot's ankle takes up what the
+    /// posture's deviations above it pitch it by, as a standing subject's does (otherwise a
+    /// joint's deviation tilts the sole, a stance on heels or toes). Default false.
+    #[serde(default)]
+    pub static_feet_flat: bool,
     /// White noise per axis (mm). Default 1.
     pub noise_mm: f64,
 }
@@ -69,6 +74,7 @@ impl SubjectSpec {
             drift_mm: (3.0, 10.0),
             tracking_drift_mm: Some((10.0, 20.0)),
             static_posture_sd_deg: 2.0,
+            static_feet_flat: true,
             ..SubjectSpec::default()
         }
     }
@@ -87,6 +93,7 @@ impl Default for SubjectSpec {
             drift_mm: (3.0, 10.0),
             tracking_drift_mm: None,
             static_posture_sd_deg: 0.0,
+            static_feet_flat: false,
             noise_mm: 1.0,
         }
     }
@@ -235,6 +242,23 @@ pub fn subject(ctx: &Context, spec: &SubjectSpec, seed: u64, index: usize) -> Sy
                 .collect()
         })
         .collect();
+    // Feet flat: each foot's ankle levels it in the frame's pose.
+    let static_p: Vec<Vec<f64>> = match (spec.static_feet_flat, ctx.up) {
+        (true, Some(up)) => static_p
+            .into_iter()
+            .map(|p| {
+                let mut y = proxy.state(&p);
+                for &(j, v) in crate::pipeline::feet_flat::level_targets(model, proxy, &up, std::slice::from_ref(&p))
+                    .iter()
+                    .flat_map(|l| &l.targets)
+                {
+                    y[j] = v;
+                }
+                proxy.proxies_from_state(&y, &p)
+            })
+            .collect(),
+        _ => static_p,
+    };
     let q_default: Vec<f64> = model.coordinates.iter().map(|c| c.default).collect();
     let render = |ps: &[Vec<f64>], rng: &mut ChaCha8Rng| -> (MarkerTrial, Vec<Vec<f64>>) {
         let mut moved = model.clone();
