@@ -40,6 +40,10 @@ pub struct AuditArgs {
     /// Override a solver setting of the synthetic subjects' solves (`KEY=VALUE`, as `solve --set`).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
+    /// Also print both methods' errors per coordinate (deg RMS) and per scale group (% RMS),
+    /// pooled over the synthetic subjects.
+    #[arg(long)]
+    pub breakdown: bool,
 }
 
 pub fn run(a: AuditArgs) -> anyhow::Result<u8> {
@@ -57,6 +61,9 @@ pub fn run(a: AuditArgs) -> anyhow::Result<u8> {
         report.real = audit_real(&datasets, &reference, &|l| eprintln!("{l}"));
     }
     print!("{}", report.table());
+    if a.breakdown {
+        print!("{}", report.breakdown.table());
+    }
     if let Some(p) = &a.report_json {
         std::fs::write(p, serde_json::to_string_pretty(&report)?)
             .with_context(|| format!("writing {}", p.display()))?;
