@@ -48,8 +48,11 @@ pub struct AuditArgs {
 
 pub fn run(a: AuditArgs) -> anyhow::Result<u8> {
     let mut ctx = Context::shipped()?;
-    // The synthetic subjects calibrate on their static trial.
+    // The synthetic subjects calibrate on their static trial, in which they stand with their arms
+    // at the model's neutral (at the sides, palms toward the thighs): the protocol tells both
+    // methods so (`--set static_arms=free` to withhold it).
     ctx.static_calibration = true;
+    ctx.settings.static_arms = crate::solve::StaticArms::Neutral;
     super::solve::apply_set(&mut ctx, &a.set)?;
     let base = if a.realistic { SubjectSpec::realistic() } else { SubjectSpec::default() };
     let spec = SubjectSpec { motion_frames: a.frames.max(1), ..base };

@@ -199,11 +199,13 @@ fn errors(ctx: &Context, s: &SyntheticSubject, cal: &[f64], r: &TrialResult) -> 
     let model = &ctx.model;
     let driven = driven_coordinates(ctx);
     let is_knee: Vec<bool> = driven.iter().map(|&c| model.coordinates[c].name.contains("knee")).collect();
-    let mut sq = vec![0.0; driven.len()];
+    let (mut sq, mut sum) = (vec![0.0; driven.len()], vec![0.0; driven.len()]);
     for (p, q) in r.proxies.iter().zip(&s.truth_q) {
         let y = ctx.proxy.state(p);
-        for (e, &c) in sq.iter_mut().zip(&driven) {
-            *e += wrap_angle(y[c] - q[c]).powi(2);
+        for (i, &c) in driven.iter().enumerate() {
+            let e = wrap_angle(y[c] - q[c]);
+            sq[i] += e * e;
+            sum[i] += e;
         }
     }
     let frames = r.proxies.len().min(s.truth_q.len());
@@ -239,6 +241,10 @@ fn errors(ctx: &Context, s: &SyntheticSubject, cal: &[f64], r: &TrialResult) -> 
         coordinate_deg: sq
             .iter()
             .map(|&e| if frames == 0 { f64::NAN } else { (e / frames as f64).sqrt().to_degrees() })
+            .collect(),
+        coordinate_bias_deg: sum
+            .iter()
+            .map(|&e| if frames == 0 { f64::NAN } else { (e / frames as f64).to_degrees() })
             .collect(),
         scale_pct: scales.iter().map(|&k| (cal[k] - truth[k]) * 100.0).collect(),
     };

@@ -14,6 +14,10 @@ pub struct Detail {
     /// Per driven rotational coordinate ([`Breakdown::coordinates`] order): RMS over the motion
     /// frames of the angle error (deg).
     pub coordinate_deg: Vec<f64>,
+    /// Per driven rotational coordinate: the mean over the motion frames of the angle error
+    /// (deg), the part of it that is a constant offset.
+    #[serde(default)]
+    pub coordinate_bias_deg: Vec<f64>,
     /// Per scale group ([`Breakdown::scales`] order): `ŝ − s` in %.
     pub scale_pct: Vec<f64>,
 }
@@ -24,6 +28,11 @@ pub struct Row {
     pub name: String,
     pub joint: f64,
     pub stagewise: f64,
+    /// Coordinates: the RMS over the subjects of each method's constant offset (deg).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint_bias: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stagewise_bias: Option<f64>,
 }
 
 /// Both methods' errors pooled over the audited subjects, per coordinate (deg) and per scale
@@ -65,12 +74,19 @@ pub fn pool(ctx: &Context, subjects: &[SubjectAudit]) -> Breakdown {
         name: name.into(),
         joint: rms(subjects.iter().filter_map(|s| f(&s.joint_detail).get(i).copied())),
         stagewise: rms(subjects.iter().filter_map(|s| f(&s.stagewise_detail).get(i).copied())),
+        joint_bias: None,
+        stagewise_bias: None,
     };
+    let bias = |d: &Detail, i: usize| d.coordinate_bias_deg.get(i).copied();
     Breakdown {
         coordinates: coords
             .iter()
             .enumerate()
-            .map(|(i, &c)| row(&ctx.model.coordinates[c].name, i, |d| &d.coordinate_deg))
+            .map(|(i, &c)| Row {
+                joint_bias: Some(rms(subjects.iter().filter_map(|s| bias(&s.joint_detail, i)))),
+                stagewise_bias: Some(rms(subjects.iter().filter_map(|s| bias(&s.stagewise_detail, i)))),
+                ..row(&ctx.model.coordinates[c].name, i, |d| &d.coordinate_deg)
+            })
             .collect(),
         scales: scales.iter().enumerate().map(|(i, &k)| row(&ctx.proxy.proxies[k].name, i, |d| &d.scale_pct)).collect(),
     }
@@ -79,9 +95,19 @@ pub fn pool(ctx: &Context, subjects: &[SubjectAudit]) -> Breakdown {
 impl Breakdown {
     /// A table: per coordinate (deg) then per scale group (%), joint / stage-wise.
     pub fn table(&self) -> String {
-        let mut s = format!("{:<24} {:>9} {:>9}\n", "coordinate (deg RMS)", "joint", "stage");
+        let mut s = format!(
+            "{:<24} {:>9} {:>9} {:>11} {:>11}\n",
+            "coordinate (deg RMS)", "joint", "stage", "joint bias", "stage bias"
+        );
         for r in &self.coordinates {
-            s += &format!("{:<24} {:>9.2} {:>9.2}\n", r.name, r.joint, r.stagewise);
+            s += &format!(
+                "{:<24} {:>9.2} {:>9.2} {:>11.2} {:>11.2}\n",
+                r.name,
+                r.joint,
+                r.stagewise,
+                r.joint_bias.unwrap_or(f64::NAN),
+                r.stagewise_bias.unwrap_or(f64::NAN)
+            );
         }
         s += &format!("{:<24} {:>9} {:>9}\n", "scale group (% RMS)", "joint", "stage");
         for r in &self.scales {
