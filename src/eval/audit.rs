@@ -27,9 +27,9 @@ pub use real::{audit_real, RealAudit};
 use crate::pipeline::{calibrate_subject, solve_trial, Context, TrialError, TrialResult};
 use crate::solve::init::wrap_angle;
 use crate::solve::FrameStatus;
+use breakdown::{driven_coordinates, scale_proxies, Breakdown, Detail};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use breakdown::{driven_coordinates, scale_proxies, Breakdown, Detail};
 use subjects::{subject, SubjectSpec, SyntheticSubject};
 
 /// Errors of one method on one subject (units in the field names).

@@ -269,7 +269,8 @@ pub struct StaticPosture {
 /// Whether a body (lower-case name) is of an arm: humerus, ulna, radius, hand, arm, scapula,
 /// clavicle, wrist, elbow, shoulder, finger.
 fn is_arm_body(name: &str) -> bool {
-    const ARM: [&str; 11] = ["humer", "ulna", "radius", "hand", "arm", "scap", "clav", "wrist", "elbow", "shoulder", "finger"];
+    const ARM: [&str; 11] =
+        ["humer", "ulna", "radius", "hand", "arm", "scap", "clav", "wrist", "elbow", "shoulder", "finger"];
     ARM.iter().any(|a| name.contains(a))
 }
 
