@@ -50,7 +50,7 @@ pub fn run(a: AuditArgs) -> anyhow::Result<u8> {
     let mut ctx = Context::shipped()?;
     // The synthetic subjects calibrate on their static trial, in which they stand with their arms
     // at the model's neutral (at the sides, palms toward the thighs): the protocol tells both
-    // methods so (`--set static_arms=free` to withhold it).
+    // methods so (`--set 'static_arms="free"'` withholds it).
     ctx.static_calibration = true;
     ctx.settings.static_arms = crate::solve::StaticArms::Neutral;
     super::solve::apply_set(&mut ctx, &a.set)?;
