@@ -469,3 +469,55 @@ fn a_converted_files_state_and_scaled_model_reproduce_its_recorded_fit() {
     assert!((again - recorded).abs() <= 0.1, "{again} vs {recorded}");
     let _ = std::fs::remove_dir_all(&tmp);
 }
+
+#[test]
+fn static_arms_at_neutral_fix_the_forearm_and_hand_that_misplaced_landmarks_turn() {
+    use smocap::eval::audit::subjects::{subject, SubjectSpec};
+    use smocap::solve::prior::StaticPosture;
+    use smocap::solve::{SolverSettings, StaticArms};
+    // A setting, free by default (protocols hold the arms down, in a T or crossed).
+    let s = SolverSettings::default();
+    assert_eq!(s.static_arms, StaticArms::Free);
+    let table: toml::Table = toml::from_str("static_arms = \"neutral\"").expect("toml");
+    assert_eq!(s.with_overrides(&table).expect("applies").static_arms, StaticArms::Neutral);
+    let bad: toml::Table = toml::from_str("static_arms = \"down\"").expect("toml");
+    assert!(s.with_overrides(&bad).is_err());
+    let mut ctx = Context::shipped().unwrap();
+    ctx.static_calibration = true;
+    // The arm coordinates are exactly those the standing posture leaves free, less the root's.
+    let (arms, held) = (StaticPosture::arm_coordinates(&ctx.model), StaticPosture::held_coordinates(&ctx.model));
+    let names: Vec<&str> =
+        (0..ctx.model.nq()).filter(|&j| arms[j]).map(|j| ctx.model.coordinates[j].name.as_str()).collect();
+    assert_eq!(names.len(), 14, "{names:?}");
+    assert!(names.iter().all(|n| ["arm_", "elbow", "pro_sup", "wrist"].iter().any(|p| n.starts_with(p))), "{names:?}");
+    assert!((0..ctx.model.nq()).all(|j| !(arms[j] && held[j])));
+    // A subject whose landmarks sit 10–20 mm off along the skin, standing with the arms at
+    // neutral: told so, calibration places the styloid and hand markers where that posture sees
+    // them, and the motion's forearm and wrist angles follow the bones, not the markers.
+    let spec = SubjectSpec { static_frames: 60, motion_frames: 100, ..SubjectSpec::realistic() };
+    let forearm: Vec<usize> = ["pro_sup_r", "pro_sup_l", "wrist_flex_r", "wrist_flex_l", "wrist_dev_r", "wrist_dev_l"]
+        .iter()
+        .map(|c| ctx.model.coordinate_index(c).expect("coordinate"))
+        .collect();
+    let rmse_deg = |ctx: &Context| {
+        let (mut sq, mut n) = (0.0, 0usize);
+        for i in 0..4 {
+            let s = subject(ctx, &spec, 11, i);
+            let cal = calibrate_subject(ctx, &[("static", &s.static_trial)]).expect("calibrates");
+            let r = solve_trial(ctx, "motion", &s.motion, &cal, 2).expect("solves");
+            for (p, q) in r.proxies.iter().zip(&s.truth_q) {
+                let y = ctx.proxy.state(p);
+                for &j in &forearm {
+                    sq += smocap::solve::init::wrap_angle(y[j] - q[j]).to_degrees().powi(2);
+                    n += 1;
+                }
+            }
+        }
+        (sq / n as f64).sqrt()
+    };
+    let free = rmse_deg(&ctx);
+    ctx.settings.static_arms = StaticArms::Neutral;
+    let neutral = rmse_deg(&ctx);
+    eprintln!("forearm and wrist RMSE against the truth: arms free {free:.2}°, held at neutral {neutral:.2}°");
+    assert!(neutral < 0.7 * free, "held {neutral:.2}° vs free {free:.2}°");
+}

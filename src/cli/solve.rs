@@ -135,8 +135,23 @@ pub fn apply_set(ctx: &mut crate::pipeline::Context, set: &[String]) -> anyhow::
     if set.is_empty() {
         return Ok(());
     }
-    let table: toml::Table = toml::from_str(&set.join("\n")).context("--set: expected KEY=VALUE (a TOML value)")?;
+    let lines: Vec<String> = set.iter().map(|kv| set_line(kv)).collect();
+    let table: toml::Table = toml::from_str(&lines.join("\n")).context("--set: expected KEY=VALUE (a TOML value)")?;
     session::apply_overrides(ctx, &table).map_err(|e| anyhow::anyhow!("--set: {e}"))
+}
+
+/// One `--set KEY=VALUE` as a TOML line: a VALUE that is not TOML but a bare word
+/// (`functional_hips=apply`, as a shell leaves `'…="apply"'` once unquoted) is taken as a string.
+fn set_line(kv: &str) -> String {
+    let Some((key, value)) = kv.split_once('=') else { return kv.to_string() };
+    let bare =
+        !value.trim().is_empty() && value.trim().chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+    let parses = toml::from_str::<toml::Table>(kv).is_ok();
+    if bare && !parses {
+        format!("{}=\"{}\"", key.trim(), value.trim())
+    } else {
+        kv.to_string()
+    }
 }
 
 pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
@@ -366,4 +381,16 @@ fn export(
         (None, _) => {}
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn set_takes_a_bare_word_as_a_string_and_leaves_toml_values_alone() {
+        assert_eq!(super::set_line("functional_hips=apply"), "functional_hips=\"apply\"");
+        assert_eq!(super::set_line("static_arms=\"neutral\""), "static_arms=\"neutral\"");
+        assert_eq!(super::set_line("anthropometric_weight=2"), "anthropometric_weight=2");
+        assert_eq!(super::set_line("registration=false"), "registration=false");
+        assert_eq!(super::set_line("label_qc.step_mm=30"), "label_qc.step_mm=30");
+    }
 }

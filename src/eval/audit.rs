@@ -17,17 +17,17 @@
 //! is reported beside OpenSim's (reference `*_summary.json`), the baseline scaling with the
 //! setup's own measurements and then placing markers when its MarkerPlacer applies.
 
+pub mod breakdown;
 mod real;
 pub mod stagewise;
 pub mod subjects;
 
 pub use real::{audit_real, RealAudit};
 
-use crate::model::proxy::ProxyKind;
-use crate::model::CoordinateKind;
 use crate::pipeline::{calibrate_subject, solve_trial, Context, TrialError, TrialResult};
 use crate::solve::init::wrap_angle;
 use crate::solve::FrameStatus;
+use breakdown::{driven_coordinates, scale_proxies, Breakdown, Detail};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use subjects::{subject, SubjectSpec, SyntheticSubject};
@@ -48,6 +48,12 @@ pub struct SubjectAudit {
     pub subject: usize,
     pub joint: MethodErrors,
     pub stagewise: MethodErrors,
+    /// The joint solve's errors per coordinate and scale group.
+    #[serde(default)]
+    pub joint_detail: Detail,
+    /// The baseline's errors per coordinate and scale group.
+    #[serde(default)]
+    pub stagewise_detail: Detail,
     /// Notes of the baseline's scaling (skipped pairs).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub notes: Vec<String>,
@@ -82,6 +88,9 @@ pub struct AuditReport {
     pub mean: Option<MeanErrors>,
     pub spec: SubjectSpec,
     pub subjects: Vec<SubjectAudit>,
+    /// Both methods' errors per coordinate and scale group, pooled over the subjects.
+    #[serde(default)]
+    pub breakdown: Breakdown,
     /// `subject N: reason` for subjects that could not be audited.
     pub failed: Vec<String>,
     pub real: Vec<RealAudit>,
@@ -133,6 +142,7 @@ pub fn audit_synthetic(ctx: &Context, n: usize, seed: u64, spec: &SubjectSpec) -
         stagewise_wins: wins_of(false),
         mean,
         spec: spec.clone(),
+        breakdown: breakdown::pool(ctx, &subjects),
         subjects,
         failed,
         real: Vec::new(),
@@ -149,12 +159,9 @@ pub fn audit_subject(ctx: &Context, spec: &SubjectSpec, seed: u64, i: usize) -> 
     let pinned = stagewise::pinned(ctx, &scale);
     let cal_s = calibrate_subject(&pinned, &statics)?;
     let stage = solve_trial(&pinned, "motion", &s.motion, &cal_s, 1)?;
-    Ok(SubjectAudit {
-        subject: i,
-        joint: errors(ctx, &s, &cal.proxies, &joint),
-        stagewise: errors(ctx, &s, &cal_s.proxies, &stage),
-        notes: scale.notes,
-    })
+    let (joint, joint_detail) = errors(ctx, &s, &cal.proxies, &joint);
+    let (stagewise, stagewise_detail) = errors(ctx, &s, &cal_s.proxies, &stage);
+    Ok(SubjectAudit { subject: i, joint, stagewise, joint_detail, stagewise_detail, notes: scale.notes })
 }
 
 /// Each scale proxy's segment length at unit scale (m): the sum over the bodies it drives of
@@ -186,31 +193,33 @@ pub fn segment_lengths(ctx: &Context) -> Vec<f64> {
         .collect()
 }
 
-/// One method's errors on subject `s`, its morphology `cal` (proxies) and its motion solve `r`.
-fn errors(ctx: &Context, s: &SyntheticSubject, cal: &[f64], r: &TrialResult) -> MethodErrors {
+/// One method's errors on subject `s`, its morphology `cal` (proxies) and its motion solve `r`:
+/// the summary and the itemised detail.
+fn errors(ctx: &Context, s: &SyntheticSubject, cal: &[f64], r: &TrialResult) -> (MethodErrors, Detail) {
     let model = &ctx.model;
-    let driven: Vec<usize> = (0..model.nq())
-        .filter(|&c| model.coordinates[c].kind == CoordinateKind::Rotational && !ctx.proxy.y_terms[c].is_empty())
-        .collect();
-    let knees: Vec<usize> = driven.iter().copied().filter(|&c| model.coordinates[c].name.contains("knee")).collect();
-    let rms_angle = |coords: &[usize]| {
-        let (mut sq, mut n) = (0.0, 0usize);
-        for (p, q) in r.proxies.iter().zip(&s.truth_q) {
-            let y = ctx.proxy.state(p);
-            for &c in coords {
-                sq += wrap_angle(y[c] - q[c]).powi(2);
-                n += 1;
-            }
+    let driven = driven_coordinates(ctx);
+    let is_knee: Vec<bool> = driven.iter().map(|&c| model.coordinates[c].name.contains("knee")).collect();
+    let (mut sq, mut sum) = (vec![0.0; driven.len()], vec![0.0; driven.len()]);
+    for (p, q) in r.proxies.iter().zip(&s.truth_q) {
+        let y = ctx.proxy.state(p);
+        for (i, &c) in driven.iter().enumerate() {
+            let e = wrap_angle(y[c] - q[c]);
+            sq[i] += e * e;
+            sum[i] += e;
         }
-        if n == 0 {
+    }
+    let frames = r.proxies.len().min(s.truth_q.len());
+    let rms_of = |pick: &dyn Fn(usize) -> bool| {
+        let (sum, n) = (0..driven.len()).filter(|&i| pick(i)).fold((0.0, 0usize), |(a, n), i| (a + sq[i], n + 1));
+        if n == 0 || frames == 0 {
             f64::NAN
         } else {
-            (sq / n as f64).sqrt().to_degrees()
+            (sum / (n * frames) as f64).sqrt().to_degrees()
         }
     };
     let lengths = segment_lengths(ctx);
     let truth = &s.truth_proxies[0];
-    let scales: Vec<usize> = (0..ctx.proxy.np()).filter(|&k| ctx.proxy.proxies[k].kind == ProxyKind::Scale).collect();
+    let scales = scale_proxies(ctx);
     let rms = |v: &mut dyn Iterator<Item = f64>| {
         let v: Vec<f64> = v.collect();
         (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
@@ -221,13 +230,25 @@ fn errors(ctx: &Context, s: &SyntheticSubject, cal: &[f64], r: &TrialResult) -> 
         .filter(|st| st.status != FrameStatus::TooFewMarkers && st.rmse_m.is_finite())
         .map(|st| st.rmse_m * 1e3)
         .collect();
-    MethodErrors {
-        pose_deg: rms_angle(&driven),
-        knee_deg: rms_angle(&knees),
+    let summary = MethodErrors {
+        pose_deg: rms_of(&|_| true),
+        knee_deg: rms_of(&|i| is_knee[i]),
         scale_mm: rms(&mut scales.iter().map(|&k| (cal[k] - truth[k]) * lengths[k] * 1e3)),
         scale_pct: rms(&mut scales.iter().map(|&k| (cal[k] - truth[k]) * 100.0)),
         marker_rmse_mm: rmse.iter().sum::<f64>() / rmse.len().max(1) as f64,
-    }
+    };
+    let detail = Detail {
+        coordinate_deg: sq
+            .iter()
+            .map(|&e| if frames == 0 { f64::NAN } else { (e / frames as f64).sqrt().to_degrees() })
+            .collect(),
+        coordinate_bias_deg: sum
+            .iter()
+            .map(|&e| if frames == 0 { f64::NAN } else { (e / frames as f64).to_degrees() })
+            .collect(),
+        scale_pct: scales.iter().map(|&k| (cal[k] - truth[k]) * 100.0).collect(),
+    };
+    (summary, detail)
 }
 
 impl AuditReport {

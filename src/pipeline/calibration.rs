@@ -265,12 +265,16 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
     let first_w = |k: Kind| if k == Kind::Static { &first_static } else { &first_motion };
     let (coord_ref, coord_w) = ctx.coordinate_tracking();
     // Static frames: the coordinate targets plus the known standing posture.
-    let posture = StaticPosture::neutral(
+    let mut posture = StaticPosture::neutral(
         &ctx.model,
         settings.static_posture_sd_deg.to_radians(),
         settings.prior_noise_sd_m,
         &ctx.static_posture_values,
     );
+    if settings.static_arms == crate::solve::StaticArms::Neutral {
+        let sd = settings.static_posture_sd_deg.to_radians();
+        posture.hold_arms(&ctx.model, sd, settings.prior_noise_sd_m, &ctx.static_posture_values);
+    }
     let (static_ref, static_w) = posture.fold(&coord_ref, &coord_w);
     let tracking_of = |k: Kind| match k {
         Kind::Static => (static_ref.as_slice(), static_w.as_slice()),

@@ -14,7 +14,7 @@ pub mod trqp;
 
 pub use calibrate::{calibrate, Calibration};
 pub use presolve::Presolver;
-pub use settings::{FunctionalHips, Presolve, QpBackend, SolverSettings, WarmStart};
+pub use settings::{FunctionalHips, Presolve, QpBackend, SolverSettings, StaticArms, WarmStart};
 pub use trqp::{FrameSolver, FrameStats, FrameStatus};
 
 /// The median of `v` (reordered in place; the mean of the two middle values for an even count;

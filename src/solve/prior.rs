@@ -266,6 +266,14 @@ pub struct StaticPosture {
     pub weights: Vec<f64>,
 }
 
+/// Whether a body (lower-case name) is of an arm: humerus, ulna, radius, hand, arm, scapula,
+/// clavicle, wrist, elbow, shoulder, finger.
+fn is_arm_body(name: &str) -> bool {
+    const ARM: [&str; 11] =
+        ["humer", "ulna", "radius", "hand", "arm", "scap", "clav", "wrist", "elbow", "shoulder", "finger"];
+    ARM.iter().any(|a| name.contains(a))
+}
+
 impl StaticPosture {
     /// The neutral posture of `model` with standard deviation `sd_rad` for the coordinates a
     /// standing posture fixes ([`StaticPosture::held_coordinates`]), priced at marker noise
@@ -291,26 +299,30 @@ impl StaticPosture {
         StaticPosture { reference, weights }
     }
 
+    /// With a static protocol whose arms hang at the model's neutral (`static_arms = "neutral"`):
+    /// the arm coordinates ([`StaticPosture::arm_coordinates`]) are held at 0 (within their
+    /// range) with the same standard deviation `sd_rad`, except those a setup's coordinate
+    /// tasks (`tasks`, as in [`StaticPosture::neutral`]) already give.
+    pub fn hold_arms(&mut self, model: &Model, sd_rad: f64, noise_m: f64, tasks: &[(usize, f64, f64)]) {
+        if sd_rad <= 0.0 {
+            return;
+        }
+        let w = (noise_m / sd_rad).powi(2);
+        for (j, arm) in StaticPosture::arm_coordinates(model).into_iter().enumerate() {
+            if arm && !tasks.iter().any(|t| t.0 == j) {
+                let c = &model.coordinates[j];
+                self.reference[j] = 0.0f64.clamp(c.range.0, c.range.1);
+                self.weights[j] = w;
+            }
+        }
+    }
+
     /// The coordinates a standing posture fixes: rotational, unlocked, not of the root body (the
     /// subject's place and heading are free) and not of an arm (a static trial's arms are held as
     /// its protocol says: down, in a T or crossed). Arm bodies are told by name (humerus, ulna,
     /// radius, hand, arm, scapula, clavicle, wrist, elbow, shoulder, finger).
     pub fn held_coordinates(model: &Model) -> Vec<bool> {
-        const ARM: [&str; 11] =
-            ["humer", "ulna", "radius", "hand", "arm", "scap", "clav", "wrist", "elbow", "shoulder", "finger"];
-        let mut held = vec![false; model.nq()];
-        for b in model.bodies.iter().filter(|b| b.parent.is_some()) {
-            let name = b.name.to_ascii_lowercase();
-            if ARM.iter().any(|a| name.contains(a)) {
-                continue;
-            }
-            for m in &model.motions[b.joint.motions.clone()] {
-                if let Some(c) = m.coordinate {
-                    let coord = &model.coordinates[c];
-                    held[c] = !coord.locked && coord.kind == crate::model::CoordinateKind::Rotational;
-                }
-            }
-        }
+        let mut held = StaticPosture::body_coordinates(model, |name| !is_arm_body(name));
         // A coordinate that also drives the root's motion stays free.
         for b in model.bodies.iter().filter(|b| b.parent.is_none()) {
             for m in &model.motions[b.joint.motions.clone()] {
@@ -320,6 +332,29 @@ impl StaticPosture {
             }
         }
         held
+    }
+
+    /// The arm coordinates a static protocol may hold (`static_arms`): rotational and unlocked,
+    /// of the bodies [`StaticPosture::held_coordinates`] leaves out as an arm's.
+    pub fn arm_coordinates(model: &Model) -> Vec<bool> {
+        StaticPosture::body_coordinates(model, is_arm_body)
+    }
+
+    /// Rotational, unlocked coordinates of the non-root bodies whose name `pick` accepts.
+    fn body_coordinates(model: &Model, pick: impl Fn(&str) -> bool) -> Vec<bool> {
+        let mut out = vec![false; model.nq()];
+        for b in model.bodies.iter().filter(|b| b.parent.is_some()) {
+            if !pick(&b.name.to_ascii_lowercase()) {
+                continue;
+            }
+            for m in &model.motions[b.joint.motions.clone()] {
+                if let Some(c) = m.coordinate {
+                    let coord = &model.coordinates[c];
+                    out[c] = !coord.locked && coord.kind == crate::model::CoordinateKind::Rotational;
+                }
+            }
+        }
+        out
     }
 
     /// This term folded into the tracking arrays `(reference, weights)` of a frame (an IK setup's

@@ -57,6 +57,22 @@ pub enum FunctionalHips {
     Apply,
 }
 
+/// How a static trial's arms are taken in calibration (the static protocol's arm posture).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum StaticArms {
+    /// Free: the protocol's arm posture is not known (down, in a T, crossed); the markers alone
+    /// pose the arms.
+    #[default]
+    Free,
+    /// The arms hang at the model's neutral (every arm coordinate 0: for the shipped model arms
+    /// at the sides, elbows straight, palms toward the thighs, wrists straight): held there with
+    /// `static_posture_sd_deg`, as the legs and trunk are. Registration then places the arm and
+    /// hand landmarks where that posture sees them, which fixes the forearm's and hand's rotation
+    /// that one misplaced styloid or hand marker would otherwise set (docs/CALIBRATION.md).
+    Neutral,
+}
+
 /// Trust-region QP settings (units: metres, radians; scale factors dimensionless).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -224,6 +240,10 @@ pub struct SolverSettings {
     /// functional offsets (mirrored across the pelvis's mid-plane), which an error of the
     /// pelvis's solved orientation does not reach. Default true (docs/CALIBRATION.md).
     pub functional_hips_symmetric: bool,
+    /// The static protocol's arm posture (`free`, `neutral`): with `neutral` a static trial's arm
+    /// coordinates are held at the model's neutral like the legs and trunk. Default `free`
+    /// (protocols differ: arms down, in a T, crossed).
+    pub static_arms: StaticArms,
     /// Label quality control of every trial before it is calibrated and solved (swapped labels,
     /// jumps, ghosts: `crate::pipeline::label_qc`); `--label-qc` sets its mode.
     pub label_qc: crate::pipeline::label_qc::LabelQcSettings,
@@ -274,6 +294,7 @@ impl Default for SolverSettings {
             registration_suspect_mm: 50.0,
             functional_hips: FunctionalHips::default(),
             functional_hips_symmetric: true,
+            static_arms: StaticArms::default(),
             label_qc: Default::default(),
         }
     }

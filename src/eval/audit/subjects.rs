@@ -64,7 +64,8 @@ impl SubjectSpec {
     /// Markers as a lab places them on skin: landmarks misplaced 10–20 mm along the skin, wands
     /// and clusters 30–60 mm and turned by 10–20° about their segment, soft tissue moving
     /// landmarks by 3–10 mm and wands by 10–20 mm with the joints, a standing posture 2° from
-    /// neutral per joint, 1 mm noise.
+    /// neutral per joint (legs and trunk; the arms hang at the model's neutral, swaying only, which
+    /// `smocap audit` tells both methods as `static_arms = "neutral"`), 1 mm noise.
     pub fn realistic() -> SubjectSpec {
         SubjectSpec {
             misplace_mm: (10.0, 20.0),
