@@ -7,8 +7,8 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use rayon::prelude::*;
 use smocap::kinematics::assembly::{EvalWorkspace, FrameProblem};
 use smocap::kinematics::cpu;
+use smocap::kinematics::synth::{synthesize, SynthOptions};
 use smocap::pipeline::Context;
-use smocap::synth::{synthesize, SynthOptions};
 use std::hint::black_box;
 
 fn kinematics(c: &mut Criterion) {

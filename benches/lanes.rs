@@ -10,10 +10,10 @@ use rayon::prelude::*;
 use smocap::kinematics::assembly::FrameProblem;
 use smocap::kinematics::backend::{BatchBackend, CpuBackend, FrameModel, GnSink, GnView};
 use smocap::kinematics::gpu::{host_path_alone, Precision, WgpuBackend, DEFAULT_CAP};
+use smocap::kinematics::synth::{synthesize, SynthOptions};
 use smocap::model::proxy::ProxyKind;
 use smocap::pipeline::{calibrate_subject, solve_trial_with, Context};
 use smocap::solve::{init::cold_start, make_qp, Calibration, FrameSolver, FrameStatus};
-use smocap::synth::{synthesize, SynthOptions};
 use std::hint::black_box;
 
 /// The pre-scheduler driver: each segment on its own thread, frame by frame.

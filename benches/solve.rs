@@ -5,10 +5,10 @@
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use smocap::kinematics::assembly::FrameProblem;
+use smocap::kinematics::synth::{synthesize, SynthOptions};
 use smocap::model::proxy::ProxyKind;
 use smocap::pipeline::{calibrate_subject, Context};
 use smocap::solve::{init::cold_start, make_qp, FrameSolver, QpBackend};
-use smocap::synth::{synthesize, SynthOptions};
 use std::hint::black_box;
 
 fn solve_sequence(c: &mut Criterion) {

@@ -17,4 +17,3 @@ pub mod model;
 pub mod pipeline;
 pub mod render;
 pub mod solve;
-pub mod synth;

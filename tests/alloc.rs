@@ -2,9 +2,9 @@
 //! once its workspaces exist: counted with a global allocator in this test binary.
 
 use smocap::kinematics::assembly::FrameProblem;
+use smocap::kinematics::synth::{synthesize, SynthOptions};
 use smocap::pipeline::Context;
 use smocap::solve::{make_qp, FrameSolver, QpBackend};
-use smocap::synth::{synthesize, SynthOptions};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 

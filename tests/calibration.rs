@@ -6,6 +6,7 @@ mod common;
 
 use common::shared;
 use smocap::io::MarkerTrial;
+use smocap::kinematics::synth::{synthesize, SynthOptions};
 use smocap::model::anthropometry::{Sex, SubjectInfo};
 use smocap::model::proxy::ProxyKind;
 use smocap::pipeline::convention::InputOptions;
@@ -13,7 +14,6 @@ use smocap::pipeline::report::trial_report;
 use smocap::pipeline::subject::{calibrate_placed_with, prepare_subject, read_trial, SubjectFiles};
 use smocap::pipeline::{calibrate_subject, solve_trial, Context};
 use smocap::solve::{Calibration, FrameStatus};
-use smocap::synth::{synthesize, SynthOptions};
 use std::path::Path;
 
 /// Mean over solved frames of the per-frame marker RMSE (mm), pooled over trials.

@@ -3,9 +3,9 @@
 
 use smocap::io::sto::read_sto;
 use smocap::io::MarkerTrial;
+use smocap::kinematics::synth::{synthesize, SynthOptions};
 use smocap::pipeline::export::write_mot;
 use smocap::pipeline::{calibrate_subject, solve_trial, Context};
-use smocap::synth::{synthesize, SynthOptions};
 use std::f64::consts::TAU;
 
 /// Turns every frame's markers about the vertical (the model's z) through its centroid, by

@@ -3,9 +3,9 @@
 
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use smocap::io::MarkerTrial;
+use smocap::kinematics::synth::{synthesize, SynthOptions};
 use smocap::pipeline::convention::{conform_trial, rotate, rotation_between, InputOptions, Units, UpAxis};
 use smocap::pipeline::Context;
-use smocap::synth::{synthesize, SynthOptions};
 use std::path::Path;
 
 /// A synthetic trial; its subject leans up to 25° at times, 9° on average.

@@ -132,8 +132,8 @@ fn segments_are_a_function_of_the_frame_count_alone() {
 /// tolerance, because the second segment's lane tracks 20 frames into the cut before it keeps any.
 #[test]
 fn a_segment_cut_is_invisible_in_the_result() {
+    use smocap::kinematics::synth::{synthesize, SynthOptions};
     use smocap::pipeline::{calibrate_subject, solve_trial, Context};
-    use smocap::synth::{synthesize, SynthOptions};
     let mut ctx = Context::shipped().unwrap();
     ctx.settings.presolve = smocap::solve::Presolve::Never;
     let s = synthesize(

@@ -1,10 +1,10 @@
 //! Functional hip centres (`functional_hips = "apply"`): a subject whose hips sit away from the
 //! model's gets them moved where the motion shows them, and its angles follow.
 
+use smocap::kinematics::synth::{synthesize, SynthOptions};
 use smocap::pipeline::{calibrate_subject, solve_trial, Context};
 use smocap::solve::prior::JointMove;
 use smocap::solve::FunctionalHips;
-use smocap::synth::{synthesize, SynthOptions};
 
 /// The shipped model with both hips `forward_m` further forward in the pelvis (unit scale).
 fn hips_moved_forward(ctx: &Context, forward_m: f64) -> Context {
@@ -27,7 +27,11 @@ fn hips_moved_forward(ctx: &Context, forward_m: f64) -> Context {
 }
 
 /// RMSE (deg) of the hip flexions of `ctx`'s solve of `s` against its truth.
-fn hip_flexion_rmse_deg(ctx: &Context, s: &smocap::synth::Synthetic, cal: &smocap::solve::Calibration) -> f64 {
+fn hip_flexion_rmse_deg(
+    ctx: &Context,
+    s: &smocap::kinematics::synth::Synthetic,
+    cal: &smocap::solve::Calibration,
+) -> f64 {
     let r = solve_trial(ctx, "walk", &s.trial, cal, 2).expect("solves");
     let joints: Vec<usize> =
         ["hip_flexion_r", "hip_flexion_l"].iter().map(|c| ctx.model.coordinate_index(c).expect("hip")).collect();

@@ -604,8 +604,8 @@ fn a_trc_with_cr_only_line_endings_reads_as_with_lf() {
 
 #[test]
 fn markers_of_weight_zero_alone_leave_nothing_to_solve_and_the_trial_fails() {
+    use smocap::kinematics::synth::{synthesize, SynthOptions};
     use smocap::pipeline::{calibrate_subject, solve_trial, Context, TrialError};
-    use smocap::synth::{synthesize, SynthOptions};
     let mut ctx = Context::shipped().unwrap();
     let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 20, seed: 3, ..SynthOptions::default() });
     let cal = calibrate_subject(&ctx, &[("t", &s.trial)]).unwrap();

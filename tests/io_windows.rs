@@ -46,7 +46,7 @@ fn windows_match_the_whole_file(path: &Path) {
 #[test]
 fn trc_windows_read_the_frames_the_whole_file_has_whatever_the_line_endings() {
     let d = tmp("trc");
-    use smocap::synth::{synthesize, SynthOptions};
+    use smocap::kinematics::synth::{synthesize, SynthOptions};
     let ctx = smocap::pipeline::Context::shipped().unwrap();
     let opt = SynthOptions { frames: 57, seed: 5, dropout: 0.1, ..SynthOptions::default() };
     let s = synthesize(&ctx.model, &ctx.proxy, &opt);

@@ -390,9 +390,9 @@ fn auto_takes_the_cpu_backend_on_a_cpu_adapter() {
 
 #[test]
 fn the_same_trial_solved_on_wgpu_and_cpu_agrees_to_a_hundredth_of_a_millimetre_and_degree() {
+    use smocap::kinematics::synth::{synthesize, SynthOptions};
     use smocap::model::CoordinateKind;
     use smocap::pipeline::{calibrate_subject, solve_trial_with};
-    use smocap::synth::{synthesize, SynthOptions};
     let generic = Context::shipped().unwrap();
     let s =
         synthesize(&generic.model, &generic.proxy, &SynthOptions { frames: 200, seed: 3, ..SynthOptions::default() });

@@ -9,11 +9,11 @@ use common::{rng, shared};
 use prost::Message;
 use rand::RngExt;
 use smocap::io::MarkerTrial;
+use smocap::kinematics::synth::{synthesize, SynthOptions, Synthetic};
 use smocap::pipeline::convention::InputOptions;
 use smocap::pipeline::label_qc::{screen_in_place, screen_trial, Action, EventKind, LabelQc, QcMode};
 use smocap::pipeline::trial::match_markers;
 use smocap::pipeline::{calibrate_subject, session, solve_trial, Context};
-use smocap::synth::{synthesize, SynthOptions, Synthetic};
 use std::path::Path;
 use std::process::Command;
 

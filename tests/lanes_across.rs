@@ -5,10 +5,10 @@
 //! read a window at a time.
 
 use smocap::io::MarkerTrial;
+use smocap::kinematics::synth::{synthesize, SynthOptions};
 use smocap::pipeline::stream::{solve_trials_streaming, TrialStream};
 use smocap::pipeline::{calibrate_subject, solve_trial_with, Context, SolvedFrame};
 use smocap::solve::Presolve;
-use smocap::synth::{synthesize, SynthOptions};
 
 /// A frame as bits: index, proxies, iterations, accepted, energy, RMSE, markers used, status,
 /// bridged.

@@ -2,10 +2,10 @@
 //! as the human model: a synthetic trot with marker noise is calibrated and solved, and the
 //! markers, joint angles and scale factors come back to the noise level.
 
+use smocap::kinematics::synth::{periodic_gait, synthesize_with, SynthOptions};
 use smocap::model::proxy::ProxyKind;
 use smocap::pipeline::report::trial_report;
 use smocap::pipeline::{calibrate_subject, solve_trial, Context};
-use smocap::synth::{periodic_gait, synthesize_with, SynthOptions};
 use std::f64::consts::PI;
 use std::path::Path;
 

@@ -2,11 +2,11 @@
 //! recovery from twisted initial guesses, and the `never` / `auto` modes of the trial pipeline.
 
 use smocap::kinematics::assembly::{EvalWorkspace, FrameProblem};
+use smocap::kinematics::synth::{synthesize, SynthOptions};
 use smocap::model::proxy::ProxyKind;
 use smocap::pipeline::{calibrate_subject, solve_trial_with, Context};
 use smocap::solve::presolve::outlier_threshold;
 use smocap::solve::{make_qp, FrameSolver, Presolve, Presolver};
-use smocap::synth::{synthesize, SynthOptions};
 
 /// One noisy synthetic frame, its truth proxies, tracking weights and reference.
 fn frame_data(ctx: &Context, seed: u64, pose_w: f64) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {

@@ -1,10 +1,10 @@
 //! The trust-region solver and the trial driver on synthetic ground truth from the shipped model.
 
 use smocap::kinematics::assembly::FrameProblem;
+use smocap::kinematics::synth::{synthesize, SynthOptions};
 use smocap::pipeline::report::trial_report;
 use smocap::pipeline::{calibrate_subject, solve_trial, Context};
 use smocap::solve::{init::cold_start, make_qp, FrameSolver, FrameStatus, QpBackend};
-use smocap::synth::{synthesize, SynthOptions};
 
 fn run(opt: SynthOptions) -> smocap::pipeline::report::TrialReport {
     let ctx = Context::shipped().unwrap();

@@ -2,8 +2,8 @@
 //! height and mass) feeds the prior and decides whether they are one person.
 
 use smocap::io::MarkerTrial;
+use smocap::kinematics::synth::{synthesize, SynthOptions};
 use smocap::pipeline::Context;
-use smocap::synth::{synthesize, SynthOptions};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 

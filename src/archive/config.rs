@@ -35,7 +35,7 @@ pub enum ConfigError {
     UnknownDataset { file: String, name: String, valid: String },
 }
 
-/// A synthetic dataset generated on the fly from the shipped model (see [`crate::synth`]).
+/// A synthetic dataset generated on the fly from the shipped model (see [`crate::kinematics::synth`]).
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SyntheticSpec {

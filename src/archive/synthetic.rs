@@ -4,9 +4,9 @@
 
 use super::config::SyntheticSpec;
 use crate::io::{trc, MarkerTrial};
+use crate::kinematics::synth::{synthesize_with, SynthOptions};
 use crate::model::proxy::ProxyKind;
 use crate::pipeline::Context;
-use crate::synth::{synthesize_with, SynthOptions};
 use std::f64::consts::TAU;
 use std::path::Path;
 

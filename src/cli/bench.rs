@@ -5,9 +5,9 @@
 use crate::kinematics::assembly::FrameProblem;
 use crate::kinematics::backend::{BatchBackend, CpuBackend, EnergyEval, FrameModel, GnSink, GnView};
 use crate::kinematics::gpu::PhaseTimes;
+use crate::kinematics::synth::{synthesize, SynthOptions};
 use crate::pipeline::device::{choose_with, BackendChoice, Chosen};
 use crate::pipeline::Context;
-use crate::synth::{synthesize, SynthOptions};
 use clap::Args;
 use std::time::Instant;
 

@@ -1,8 +1,8 @@
 //! `smocap demo`: the whole path on the embedded default (shipped model, synthetic trial).
 
+use crate::kinematics::synth::{synthesize, SynthOptions};
 use crate::pipeline::report::{trial_report, Report};
 use crate::pipeline::{calibrate_subject, solve_trial_with, Context};
-use crate::synth::{synthesize, SynthOptions};
 use clap::Args;
 
 #[derive(Args, Debug)]

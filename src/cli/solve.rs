@@ -1,10 +1,10 @@
 //! `smocap solve`: calibrate a subject, then solve its trials.
 
+use crate::kinematics::synth::Truth;
 use crate::pipeline::report::Report;
 use crate::pipeline::session;
 use crate::pipeline::subject::{prepare_subject, Subject, SubjectFiles};
 use crate::solve::QpBackend;
-use crate::synth::Truth;
 use anyhow::Context as _;
 use clap::Args;
 use std::path::PathBuf;

@@ -1,7 +1,7 @@
 //! `smocap synth`: a synthetic trial and its truth.
 
 use crate::io::trc;
-use crate::synth::{synthesize, SynthOptions};
+use crate::kinematics::synth::{synthesize, SynthOptions};
 use anyhow::Context as _;
 use clap::Args;
 use std::path::PathBuf;

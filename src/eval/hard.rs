@@ -1,5 +1,5 @@
 //! The hard synthetic set of the pre-solve evaluation: one subject (the shipped model at seeded
-//! scales, from [`crate::synth`]) through four kinds of hard frames, each deterministic for a
+//! scales, from [`crate::kinematics::synth`]) through four kinds of hard frames, each deterministic for a
 //! seed. Lengths in metres, angles in radians.
 //!
 //! - `pirouette`: the base motion with the root turning about the vertical in bursts of up to
@@ -15,9 +15,9 @@
 
 use crate::io::MarkerTrial;
 use crate::kinematics::cpu::{self, Workspace};
+use crate::kinematics::synth::{synthesize, SynthOptions, Synthetic};
 use crate::model::proxy::{ProxyKind, ProxyMap};
 use crate::model::Model;
-use crate::synth::{synthesize, SynthOptions, Synthetic};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};

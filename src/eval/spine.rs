@@ -10,13 +10,13 @@
 //! exactly, nopoly can but is weakly observed (one lumbar marker, L3), and classical cannot.
 
 use crate::io::mjcf;
+use crate::kinematics::synth::{synthesize_with, SynthOptions, Synthetic};
 use crate::model::profile::{Coupling, Profile};
 use crate::model::proxy::ProxyKind;
 use crate::pipeline::context::{SHIPPED_MODEL, SHIPPED_PROFILE};
 use crate::pipeline::report::{trial_report, PoseError, ScaleError};
 use crate::pipeline::stats::{MeanP50P90, P50P90};
 use crate::pipeline::{calibrate_subject, solve_trial_with, Context};
-use crate::synth::{synthesize_with, SynthOptions, Synthetic};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};

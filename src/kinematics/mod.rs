@@ -4,7 +4,8 @@
 //!
 //! The CPU implementation ([`cpu`]) is the reference; derivations are in `docs/KINEMATICS.md`.
 //! Batches of frames are evaluated behind [`backend::BatchBackend`]: on the CPU
-//! ([`backend::CpuBackend`]) or in wgpu compute shaders ([`gpu::WgpuBackend`]).
+//! ([`backend::CpuBackend`]) or in wgpu compute shaders ([`gpu::WgpuBackend`]). [`synth`]
+//! observes a model's smooth motion through it: synthetic trials with their truth.
 
 pub mod assembly;
 pub mod backend;
@@ -12,6 +13,7 @@ pub mod batch;
 pub mod cpu;
 pub mod gpu;
 pub mod layout;
+pub mod synth;
 
 pub use assembly::{FrameProblem, GaussNewton};
 pub use backend::{BatchBackend, CpuBackend, EnergyEval, FrameModel};

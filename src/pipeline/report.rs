@@ -3,9 +3,9 @@
 use super::convention::InputConventions;
 use super::stats::{GapStats, MeanP50P90, P50P90};
 use super::{Context, TrialResult};
+use crate::kinematics::synth::Truth;
 use crate::model::proxy::ProxyKind;
 use crate::solve::{FrameStatus, SolverSettings};
-use crate::synth::Truth;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 

@@ -13,8 +13,8 @@ use super::verdict::{mask_implausible, Judge, Verdict};
 use super::{solve_trial_with, Context, TrialResult};
 use crate::io::{MarkerFileError, MarkerTrial};
 use crate::kinematics::backend::BatchBackend;
+use crate::kinematics::synth::Truth;
 use crate::solve::Calibration;
-use crate::synth::Truth;
 use std::path::Path;
 
 /// Brings `trial` (as read, or built in memory) into the model's units and up axis, then masks

@@ -4,14 +4,14 @@
 //! proportional to `sin(q − q_default)` of the coordinate nearest above the marker's body, of
 //! `drift_mm` amplitude: smooth and pose-correlated, near zero in the static pose), white
 //! noise; a static trial (default pose with slight sway) and a motion trial (the smooth
-//! band-limited motion of [`crate::synth`]). Neither method is told the misplacement or drift.
+//! band-limited motion of [`crate::kinematics::synth`]). Neither method is told the misplacement or drift.
 
 use crate::io::MarkerTrial;
 use crate::kinematics::cpu::{self, Workspace};
+use crate::kinematics::synth::{synthesize, SynthOptions};
 use crate::model::proxy::ProxyKind;
 use crate::model::{CoordinateKind, Model};
 use crate::pipeline::Context;
-use crate::synth::{synthesize, SynthOptions};
 use nalgebra::Vector3;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
