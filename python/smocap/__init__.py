@@ -16,6 +16,18 @@ Errors raise :class:`SmocapError` (or a subclass) with the message the command l
 results to use with care (a ``suspect`` trial or calibration) warn with :class:`SmocapWarning`.
 """
 
+import os as _os
+import sys as _sys
+import tempfile as _tempfile
+
+# On a headless Linux machine Mesa's Vulkan drivers, probed for a GPU, print "error:
+# XDG_RUNTIME_DIR is invalid or not set" through libwayland: an error that is none. A runtime
+# directory for the process silences it (as the command line does).
+if _sys.platform.startswith("linux") and not _os.environ.get("XDG_RUNTIME_DIR") and not _os.environ.get(
+    "WAYLAND_DISPLAY"
+):
+    _os.environ["XDG_RUNTIME_DIR"] = _tempfile.gettempdir()
+
 from ._smocap import (
     ArchiveError,
     CalibrationError,
