@@ -27,7 +27,6 @@ use super::qp::{BoxQp, ClarabelQp, LinearConstraints, QpProblem, QpSolver};
 use super::settings::SolverSettings;
 use super::trqp::FrameSolver;
 use crate::kinematics::assembly::{EvalWorkspace, Evaluator, FrameProblem};
-use crate::kinematics::cpu;
 use crate::model::proxy::ProxyKind;
 use crate::model::proxy::ProxyMap;
 use crate::model::Model;
@@ -255,8 +254,34 @@ impl JointProblem<'_> {
     fn scale_indices(&self) -> (Vec<usize>, Vec<usize>) {
         let np = self.proxy.np();
         let scale = (0..np).filter(|&k| self.proxy.proxies[k].kind == ProxyKind::Scale).collect();
-        let pose = (0..np).filter(|&k| self.proxy.proxies[k].kind != ProxyKind::Scale).collect();
+        let mut pose: Vec<usize> = (0..np).filter(|&k| self.proxy.proxies[k].kind != ProxyKind::Scale).collect();
+        // Leaves first: each pose proxy after every proxy that moves a body below it, so that
+        // a frame's Cholesky factor has no fill and `U = L⁻¹B` keeps each marker's column zero
+        // off its chain to the root ([`fixed::solve_lower_sparse`], [`fixed::add_t_mul_sym_sparse`]).
+        let depth = self.pose_depths();
+        pose.sort_by_key(|&k| std::cmp::Reverse(depth[k]));
         (scale, pose)
+    }
+
+    /// Per proxy: the depth in the body tree (bodies on its root chain) of the highest body whose
+    /// joint coordinates it drives (`usize::MAX` for a proxy that drives none).
+    fn pose_depths(&self) -> Vec<usize> {
+        let model = self.model;
+        let mut body_of = vec![None; model.nq()];
+        for (b, body) in model.bodies.iter().enumerate() {
+            for m in body.joint.motions.clone() {
+                if let Some(c) = model.motions[m].coordinate {
+                    body_of[c] = Some(b);
+                }
+            }
+        }
+        let mut depth = vec![usize::MAX; self.proxy.np()];
+        for t in &self.proxy.terms {
+            if let Some(Some(b)) = body_of.get(t.y_index) {
+                depth[t.proxy] = depth[t.proxy].min(model.chain(*b).len());
+            }
+        }
+        depth
     }
 
     fn model_with(&self, offsets: &[Vector3<f64>]) -> Model {
@@ -318,9 +343,7 @@ impl JointProblem<'_> {
         cols: &[Option<usize>],
         nz: usize,
     ) -> Linear {
-        let (ns, nq) = (scale.len(), pose.len());
-        let nm = self.model.markers.len();
-        let zero_w = vec![0.0; nm];
+        let nq = pose.len();
         let model = self.model_with(&state.offsets);
         let eval = Evaluator::new(&model, self.proxy);
         let mut c = DMatrix::<f64>::zeros(nz, nz);
@@ -336,6 +359,12 @@ impl JointProblem<'_> {
         // Frames in pieces of [`ELIMINATION_PIECE`] in parallel, each piece with its own
         // workspace and partial sums, added in piece order (the same bits whatever the threads).
         use rayon::prelude::*;
+        let registered = cols.iter().any(Option::is_some);
+        // Each proxy's row among the poses and column among the scales.
+        let mut pose_row = vec![None; self.proxy.np()];
+        let mut scale_col = vec![None; self.proxy.np()];
+        pose.iter().enumerate().for_each(|(i, &k)| pose_row[k] = Some(i));
+        scale.iter().enumerate().for_each(|(i, &k)| scale_col[k] = Some(i));
         let idx: Vec<usize> = (0..self.frames.len()).collect();
         let pieces: Vec<(DMatrix<f64>, DVector<f64>, Vec<FrameLinear>)> = idx
             .par_chunks(ELIMINATION_PIECE)
@@ -346,84 +375,64 @@ impl JointProblem<'_> {
                 let mut frames = Vec::with_capacity(piece.len());
                 for &k in piece {
                     let (obs, p, mw) = (self.frames[k], &state.poses[k], self.weights[k]);
-                    // Coordinate targets alone (marker weights 0) give the tracking part of H and g.
-                    let tp = FrameProblem {
+                    // The frame's Gauss–Newton model over all proxies (markers and coordinate
+                    // targets, per body as the frame solver forms it): `A`, `g_q`, and the scale
+                    // columns of `B`, `C` and `g_z`.
+                    let fp = FrameProblem {
                         observed: obs,
-                        marker_weights: &zero_w,
+                        marker_weights: mw,
                         tracking_ref: self.tracking_refs[k],
                         tracking_weights: self.tracking_weights[k],
                     };
-                    eval.linearize(p, &tp, &mut ws);
-                    let mut a = ws.gn.h.select_rows(pose).select_columns(pose);
+                    eval.linearize(p, &fp, &mut ws);
+                    let h = &ws.gn.h;
+                    let mut a = h.select_rows(pose).select_columns(pose);
                     let mut gq = ws.gn.g.select_rows(pose);
-                    let fp = FrameProblem { marker_weights: mw, ..tp };
-                    eval.energy(p, &fp, &mut ws);
-                    cpu::jacobian(&model, &eval.layout, &mut ws.kin);
-                    let jm = eval.marker_jacobian(&ws);
-                    // Rows of observed, weighted markers, scaled by √w.
-                    let rows: Vec<usize> =
-                        (0..nm).filter(|&m| mw[m] > 0.0 && obs[3 * m..3 * m + 3].iter().all(|v| !v.is_nan())).collect();
-                    let nr = 3 * rows.len();
-                    let mut jq = DMatrix::zeros(nr, nq);
-                    let mut js = DMatrix::zeros(nr, ns);
-                    let mut r = DVector::zeros(nr);
-                    for (i, &m) in rows.iter().enumerate() {
-                        let sw = mw[m].sqrt();
-                        for a in 0..3 {
-                            let row = 3 * m + a;
-                            r[3 * i + a] = sw * (ws.kin.markers[row] - obs[row]);
-                            for (c, &k) in pose.iter().enumerate() {
-                                jq[(3 * i + a, c)] = sw * jm[(row, k)];
-                            }
-                            for (c, &k) in scale.iter().enumerate() {
-                                js[(3 * i + a, c)] = sw * jm[(row, k)];
-                            }
-                        }
-                    }
-                    fixed::add_t_mul_sym_tiled(&mut a, 1.0, &jq);
-                    gq += fixed::t_mul_v(&jq, &r);
-                    // Scale part.
-                    let g_s = fixed::t_mul_v(&js, &r);
                     let mut b = DMatrix::zeros(nq, nz);
-                    fixed::add_t_mul(&mut b, (0, 0), 1.0, &jq, &js);
-                    fixed::add_t_mul_sym(&mut c, 0, 1.0, &js);
-                    neg_gz.rows_mut(0, ns).sub_assign(&g_s);
-                    // Offset parts: marker m's rows depend on its own offset through R_b diag(s_b), a
-                    // 3 × 3 block per marker: `B`'s columns `jq_mᵀ J_o`, and on the diagonal of `C`.
-                    for (i, &m) in rows.iter().enumerate() {
-                        let Some(col) = cols[m] else { continue };
-                        let bdy = model.markers[m].body;
-                        let sb = Vector3::new(
-                            ws.y[model.scale_index(bdy, 0)],
-                            ws.y[model.scale_index(bdy, 1)],
-                            ws.y[model.scale_index(bdy, 2)],
-                        );
-                        let sw = mw[m].sqrt();
-                        let jo: Matrix3<f64> = ws.kin.body_rot[bdy] * Matrix3::from_diagonal(&sb) * sw;
-                        for q in 0..nq {
-                            let jr = Vector3::new(jq[(3 * i, q)], jq[(3 * i + 1, q)], jq[(3 * i + 2, q)]);
-                            let v = jo.tr_mul(&jr);
-                            for a in 0..3 {
-                                b[(q, col + a)] = v[a];
-                            }
+                    for (c_, &ks) in scale.iter().enumerate() {
+                        for (r_, &kq) in pose.iter().enumerate() {
+                            b[(r_, c_)] = h[(kq, ks)];
                         }
-                        for sc in 0..ns {
-                            let jr = Vector3::new(js[(3 * i, sc)], js[(3 * i + 1, sc)], js[(3 * i + 2, sc)]);
-                            let v = jo.tr_mul(&jr);
-                            for a in 0..3 {
-                                c[(sc, col + a)] += v[a];
-                                c[(col + a, sc)] += v[a];
-                            }
+                        for (r_, &kr) in scale.iter().enumerate() {
+                            c[(r_, c_)] += h[(kr.min(ks), kr.max(ks))];
                         }
-                        let joo = jo.tr_mul(&jo);
-                        let r_m = Vector3::new(r[3 * i], r[3 * i + 1], r[3 * i + 2]);
-                        let g_o = jo.tr_mul(&r_m);
-                        for a in 0..3 {
-                            for bb in 0..3 {
-                                c[(col + a, col + bb)] += joo[(a, bb)];
+                        neg_gz[c_] -= ws.gn.g[ks];
+                    }
+                    // Offset parts: marker m's rows depend on its own offset through
+                    // `J_o = R_b diag(s_b)`, a 3 × 3 block per marker: `B`'s columns `w J_qᵀ J_o`,
+                    // `C`'s `w J_sᵀ J_o` and `w J_oᵀ J_o`, and `g_o = w J_oᵀ r`.
+                    if registered {
+                        eval.marker_rows(&fp, &mut ws, |m, proxies, rows, kin, y| {
+                            let Some(col) = cols[m] else { return };
+                            let w = mw[m];
+                            let bdy = model.markers[m].body;
+                            let sb = Vector3::from_fn(|ax, _| y[model.scale_index(bdy, ax)]);
+                            let jo: Matrix3<f64> = kin.body_rot[bdy] * Matrix3::from_diagonal(&sb);
+                            for (slot, &k) in proxies.iter().enumerate() {
+                                let jr = Vector3::new(rows[3 * slot], rows[3 * slot + 1], rows[3 * slot + 2]);
+                                let v = jo.tr_mul(&jr) * w;
+                                if let Some(q) = pose_row[k] {
+                                    for ax in 0..3 {
+                                        b[(q, col + ax)] = v[ax];
+                                    }
+                                } else if let Some(sc) = scale_col[k] {
+                                    for ax in 0..3 {
+                                        c[(sc, col + ax)] += v[ax];
+                                        c[(col + ax, sc)] += v[ax];
+                                    }
+                                }
                             }
-                            neg_gz[col + a] -= g_o[a];
-                        }
+                            let joo = jo.tr_mul(&jo) * w;
+                            let row = 3 * m;
+                            let r_m = Vector3::from_fn(|ax, _| kin.markers[row + ax] - obs[row + ax]);
+                            let g_o = jo.tr_mul(&r_m) * w;
+                            for ax in 0..3 {
+                                for bb in 0..3 {
+                                    c[(col + ax, col + bb)] += joo[(ax, bb)];
+                                }
+                                neg_gz[col + ax] -= g_o[ax];
+                            }
+                        });
                     }
                     // Poses at an end of their range that the gradient pushes beyond it stay there: the
                     // step would be clipped, and the rest of the frame's step, computed as if it were
@@ -481,10 +490,11 @@ impl JointProblem<'_> {
                     };
                     let l = chol.unpack();
                     let mut u = f.b.clone();
-                    l.solve_lower_triangular_unchecked_mut(&mut u);
+                    fixed::solve_lower_sparse(&l, &mut u);
                     let mut w = f.gq.clone();
                     l.solve_lower_triangular_unchecked_mut(&mut w);
-                    fixed::add_t_mul_sym_tiled(&mut s, -1.0, &u);
+                    fixed::add_t_mul_sym_sparse(&mut s, -1.0, &u);
+
                     reduced += fixed::t_mul_v(&u, &w);
                     blocks.push(Some(FrameBlocks { l, u, w, damping }));
                 }
@@ -634,8 +644,6 @@ impl JointProblem<'_> {
         JointOutcome { iterations: iterations - rejected, rejected, energy, rmse_m: rmse }
     }
 }
-
-use std::ops::SubAssign;
 
 /// Calibrates the scale proxies (offsets fixed) on `frames` (observed marker arrays,
 /// `3·marker + axis`, NaN gaps). `frame_template` supplies weights and tracking arrays (its
