@@ -216,6 +216,7 @@ impl<'m> Evaluator<'m> {
     /// The body's chain, once for all its markers, into `aw` (`A_s` then `W_s`, 3 per slot): the
     /// `J_m` row of slot `s` at a point `x` on the body is `A_s + W_s × x` (plus the point's own
     /// offset terms).
+    #[inline(always)]
     fn chain_rows(&self, deps: &crate::kinematics::layout::BodyDeps, kin: &Workspace, dphi: &[f64], aw: &mut [f64]) {
         let ns = deps.proxies.len();
         aw[..6 * ns].fill(0.0);
@@ -234,6 +235,7 @@ impl<'m> Evaluator<'m> {
 
     /// Marker `m`'s compact rows of `J_m` (3 per slot of `deps.proxies`, interleaved by axis) from
     /// its body's [`Evaluator::chain_rows`].
+    #[inline(always)]
     fn marker_row(
         &self,
         deps: &crate::kinematics::layout::BodyDeps,

@@ -386,8 +386,15 @@ impl JointProblem<'_> {
                     };
                     eval.linearize(p, &fp, &mut ws);
                     let h = &ws.gn.h;
-                    let mut a = h.select_rows(pose).select_columns(pose);
-                    let mut gq = ws.gn.g.select_rows(pose);
+                    let (hs, np) = (h.as_slice(), h.nrows());
+                    let mut a = DMatrix::zeros(nq, nq);
+                    for (col, &kj) in a.as_mut_slice().chunks_exact_mut(nq).zip(pose) {
+                        let hj = &hs[kj * np..(kj + 1) * np];
+                        for (v, &ki) in col.iter_mut().zip(pose) {
+                            *v = hj[ki];
+                        }
+                    }
+                    let mut gq = DVector::from_iterator(nq, pose.iter().map(|&k| ws.gn.g[k]));
                     let mut b = DMatrix::zeros(nq, nz);
                     for (c_, &ks) in scale.iter().enumerate() {
                         for (r_, &kq) in pose.iter().enumerate() {
@@ -827,6 +834,25 @@ impl Tracker {
             multi_start(solver, &fp, &mut self.p, &self.p0)
         };
         self.warm = st.status != super::FrameStatus::TooFewMarkers;
+        &self.p
+    }
+
+    /// [`Tracker::step`] with at most `iterations` trust-region iterations when warm-started
+    /// (a frame that only carries the pose forward to the next); a cold start (several starts)
+    /// is solved in full.
+    pub fn step_limited(
+        &mut self,
+        solver: &mut FrameSolver<'_>,
+        obs: &[f64],
+        frame_template: &FrameProblem<'_>,
+        iterations: u32,
+    ) -> &[f64] {
+        let full = solver.settings.max_iterations;
+        if self.warm {
+            solver.settings.max_iterations = iterations.min(full);
+        }
+        self.step(solver, obs, frame_template);
+        solver.settings.max_iterations = full;
         &self.p
     }
 
