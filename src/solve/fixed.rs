@@ -186,13 +186,13 @@ pub fn add_t_mul_sym_tiled(out: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>)
 /// product), and each 4 × 4 tile of outputs sums only over the rows where some column of its
 /// left four and some of its right four are non-zero, in increasing order. A skipped row only
 /// adds `±0` products to a sum that starts at `+0` (never `−0`), so the result is bit for bit
-/// [`add_t_mul_sym_tiled`]'s; a column holding a non-finite value keeps all its rows. The
+/// [`add_t_mul_sym_tiled`]'s (a matrix holding a non-finite value goes to it whole). The
 /// calibration's reduced system uses it: with the poses ordered leaves first, `U = L⁻¹B`'s column
 /// of a marker is non-zero only on the pose proxies that move it (its chain to the root), and two
 /// markers on different limbs share only the root's and trunk's.
 pub fn add_t_mul_sym_sparse(out: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>) {
     let (n, m) = (a.nrows(), a.ncols());
-    if n > 64 {
+    if n > 64 || a.iter().any(|v| !v.is_finite()) {
         return add_t_mul_sym_tiled(out, alpha, a);
     }
     assert_eq!((out.nrows(), out.ncols()), (m, m), "add_t_mul_sym_sparse: out is not {m}×{m}");
@@ -201,9 +201,6 @@ pub fn add_t_mul_sym_sparse(out: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>
     let mask = |j: usize| -> u64 {
         let mut bits = 0u64;
         for (k, v) in c(j).iter().enumerate() {
-            if !v.is_finite() {
-                return u64::MAX;
-            }
             if *v != 0.0 {
                 bits |= 1 << k;
             }
@@ -288,11 +285,15 @@ pub fn add_t_mul_sym_sparse(out: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>
 /// nalgebra's `solve_lower_triangular_unchecked_mut` does it (`x_k /= L_kk`, then
 /// `x_i −= L_ik x_k` for `i > k`, in increasing `k`), skipping the exact zeros: an `x_k` that is
 /// zero, and the rows where `L`'s column `k` is. The result is nalgebra's but for the sign of
-/// zeros; with the poses ordered leaves first (`solve::calibrate`), a marker's column has
+/// zeros (with a non-finite value anywhere, nalgebra's solve runs instead); with the poses ordered leaves first (`solve::calibrate`), a marker's column has
 /// non-zeros only on its chain to the root and `L` no fill, so most of the work is skipped.
 pub fn solve_lower_sparse(l: &DMatrix<f64>, b: &mut DMatrix<f64>) {
     let n = l.nrows();
     assert!(l.ncols() == n && b.nrows() == n, "solve_lower_sparse: shapes");
+    if l.iter().chain(b.iter()).any(|v| !v.is_finite()) {
+        l.solve_lower_triangular_unchecked_mut(b);
+        return;
+    }
     let ld = l.as_slice();
     // Below-diagonal non-zero rows of each column of `l`.
     let mut below: Vec<usize> = Vec::with_capacity(n * n / 2);
@@ -364,7 +365,7 @@ mod tests {
     #[test]
     fn the_sparse_symmetric_product_is_the_dense_one_bit_for_bit() {
         // Irrational-ish values with exact zeros in blocks (as `L⁻¹B` has them), ragged tiles,
-        // and a column holding a NaN (kept whole, as the dense product propagates it).
+        // and a matrix holding a NaN (the dense product's, which propagates it).
         let zero = |i: usize, j: usize| (i * 7 + j * 3) % 5 < 2 || (j > 9 && i < 20);
         let a = DMatrix::from_fn(37, 23, |i, j| if zero(i, j) { 0.0 } else { ((i * 13 + j) as f64).sin() * 1e3 });
         for alpha in [1.0, -1.0, 0.3] {
