@@ -168,39 +168,10 @@ impl<'m> Evaluator<'m> {
                     blk.fill(0.0);
                     gp.fill(0.0);
                     any = true;
-                    // The body's chain, once for all its markers: J_m row of slot s at a point x
-                    // on the body is A_s + W_s × x (plus the point's own offset terms).
-                    aw[..6 * ns].fill(0.0);
-                    let (a_s, w_s) = aw[..6 * ns].split_at_mut(3 * ns);
-                    cpu::chain_contributions(self.model, kin, m_body(self.model, deps), |j, a, wv| {
-                        for t in self.proxy.y_terms[j].clone() {
-                            let s = 3 * deps.slot_of_proxy[self.proxy.terms[t].proxy];
-                            let d = dphi[t];
-                            for k in 0..3 {
-                                a_s[s + k] += a[k] * d;
-                                w_s[s + k] += wv[k] * d;
-                            }
-                        }
-                    });
+                    self.chain_rows(deps, kin, dphi, aw);
                 }
-                let x = kin.marker(m);
                 let rows = &mut row[..3 * ns];
-                let (a_s, w_s) = aw[..6 * ns].split_at(3 * ns);
-                for s in 0..ns {
-                    let (a, wv) = (&a_s[3 * s..3 * s + 3], &w_s[3 * s..3 * s + 3]);
-                    rows[3 * s] = a[0] + wv[1] * x.z - wv[2] * x.y;
-                    rows[3 * s + 1] = a[1] + wv[2] * x.x - wv[0] * x.z;
-                    rows[3 * s + 2] = a[2] + wv[0] * x.y - wv[1] * x.x;
-                }
-                cpu::marker_offset_contributions(self.model, kin, m, |j, v| {
-                    for t in self.proxy.y_terms[j].clone() {
-                        let s = 3 * deps.slot_of_proxy[self.proxy.terms[t].proxy];
-                        let d = dphi[t];
-                        rows[s] += v.x * d;
-                        rows[s + 1] += v.y * d;
-                        rows[s + 2] += v.z * d;
-                    }
-                });
+                self.marker_row(deps, kin, dphi, aw, m, rows);
                 // H_S += w Σ_a c_a c_aᵀ (upper triangle), g_S += w Σ_a c_a r_a; rows interleaved by axis.
                 let r = [kin.markers[3 * m] - obs[0], kin.markers[3 * m + 1] - obs[1], kin.markers[3 * m + 2] - obs[2]];
                 for i in 0..ns {
@@ -238,6 +209,88 @@ impl<'m> Evaluator<'m> {
                 for u in terms.clone() {
                     gn.h[(kt, self.proxy.terms[u].proxy)] += w * dphi[t] * dphi[u];
                 }
+            }
+        }
+    }
+
+    /// The body's chain, once for all its markers, into `aw` (`A_s` then `W_s`, 3 per slot): the
+    /// `J_m` row of slot `s` at a point `x` on the body is `A_s + W_s × x` (plus the point's own
+    /// offset terms).
+    #[inline(always)]
+    fn chain_rows(&self, deps: &crate::kinematics::layout::BodyDeps, kin: &Workspace, dphi: &[f64], aw: &mut [f64]) {
+        let ns = deps.proxies.len();
+        aw[..6 * ns].fill(0.0);
+        let (a_s, w_s) = aw[..6 * ns].split_at_mut(3 * ns);
+        cpu::chain_contributions(self.model, kin, m_body(self.model, deps), |j, a, wv| {
+            for t in self.proxy.y_terms[j].clone() {
+                let s = 3 * deps.slot_of_proxy[self.proxy.terms[t].proxy];
+                let d = dphi[t];
+                for k in 0..3 {
+                    a_s[s + k] += a[k] * d;
+                    w_s[s + k] += wv[k] * d;
+                }
+            }
+        });
+    }
+
+    /// Marker `m`'s compact rows of `J_m` (3 per slot of `deps.proxies`, interleaved by axis) from
+    /// its body's [`Evaluator::chain_rows`].
+    #[inline(always)]
+    fn marker_row(
+        &self,
+        deps: &crate::kinematics::layout::BodyDeps,
+        kin: &Workspace,
+        dphi: &[f64],
+        aw: &[f64],
+        m: usize,
+        rows: &mut [f64],
+    ) {
+        let ns = deps.proxies.len();
+        let x = kin.marker(m);
+        let (a_s, w_s) = aw[..6 * ns].split_at(3 * ns);
+        for s in 0..ns {
+            let (a, wv) = (&a_s[3 * s..3 * s + 3], &w_s[3 * s..3 * s + 3]);
+            rows[3 * s] = a[0] + wv[1] * x.z - wv[2] * x.y;
+            rows[3 * s + 1] = a[1] + wv[2] * x.x - wv[0] * x.z;
+            rows[3 * s + 2] = a[2] + wv[0] * x.y - wv[1] * x.x;
+        }
+        cpu::marker_offset_contributions(self.model, kin, m, |j, v| {
+            for t in self.proxy.y_terms[j].clone() {
+                let s = 3 * deps.slot_of_proxy[self.proxy.terms[t].proxy];
+                let d = dphi[t];
+                rows[s] += v.x * d;
+                rows[s + 1] += v.y * d;
+                rows[s + 2] += v.z * d;
+            }
+        });
+    }
+
+    /// Every observed, weighted marker's compact rows of `J_m` at the last evaluation
+    /// ([`Evaluator::energy`] or [`Evaluator::linearize`] of `frame`): `f(m, proxies, rows, ws)`
+    /// with `rows` 3 per entry of `proxies` (the proxies that can move the marker), interleaved
+    /// by axis, as [`Evaluator::linearize`] forms them. No dense `J_m` is built.
+    pub fn marker_rows(
+        &self,
+        frame: &FrameProblem<'_>,
+        ws: &mut EvalWorkspace,
+        mut f: impl FnMut(usize, &[usize], &[f64], &Workspace, &[f64]),
+    ) {
+        let EvalWorkspace { kin, y, dphi, aw, row, .. } = ws;
+        for deps in &self.layout.bodies {
+            let ns = deps.proxies.len();
+            let mut any = false;
+            for &m in &deps.markers {
+                let obs = &frame.observed[3 * m..3 * m + 3];
+                if frame.marker_weights[m] <= 0.0 || obs.iter().any(|v| v.is_nan()) {
+                    continue;
+                }
+                if !any {
+                    any = true;
+                    self.chain_rows(deps, kin, dphi, aw);
+                }
+                let rows = &mut row[..3 * ns];
+                self.marker_row(deps, kin, dphi, aw, m, rows);
+                f(m, &deps.proxies, rows, kin, y);
             }
         }
     }

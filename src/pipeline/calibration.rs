@@ -349,7 +349,11 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
                 if !is_chosen && (a + i - begin) % step != 0 {
                     continue;
                 }
-                let p = tracker.step(&mut solver, row, &template);
+                // Frames between calibration frames only carry the pose forward: a few
+                // iterations (`calibration_track_iterations`) rather than convergence.
+                let cap = settings.calibration_track_iterations;
+                let iterations = if is_chosen || cap == 0 { settings.max_iterations } else { cap };
+                let p = tracker.step_limited(&mut solver, row, &template, iterations);
                 tracked += 1;
                 if is_chosen {
                     next.next();

@@ -16,22 +16,23 @@
 //!
 //! Cost: eliminating the poses leaves a dense system over `z` (scales and offsets, `nz` ≈ 175),
 //! where eliminating the offsets (3 × 3 blocks) would leave one over every frame's pose; it is
-//! formed from each frame's `UᵀU` (`fixed::add_t_mul_sym_tiled`), frames linearised and
-//! eliminated in parallel in fixed pieces, the linearisation kept across rejected steps
+//! formed from each frame's `UᵀU` (`super::schur`: frames linearised by the frame solver's
+//! per-body Gauss–Newton, poses ordered leaves first so that the zeros of `U` are skipped,
+//! frames in parallel in fixed pieces), the linearisation kept across rejected steps
 //! (docs/CALIBRATION.md, "Which unknowns to eliminate").
 
 use super::fixed;
 use super::init::multi_start;
 use super::prior::{GlobalTerm, Globals};
 use super::qp::{BoxQp, ClarabelQp, LinearConstraints, QpProblem, QpSolver};
+use super::schur::Linear;
 use super::settings::SolverSettings;
 use super::trqp::FrameSolver;
 use crate::kinematics::assembly::{EvalWorkspace, Evaluator, FrameProblem};
-use crate::kinematics::cpu;
 use crate::model::proxy::ProxyKind;
 use crate::model::proxy::ProxyMap;
 use crate::model::Model;
-use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use nalgebra::{DMatrix, DVector, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// What calibration found.
@@ -216,50 +217,8 @@ pub struct JointOutcome {
     pub rmse_m: f64,
 }
 
-/// Per-frame blocks of the Schur complement: `A = L Lᵀ`, `U = L⁻¹ B`, `w = L⁻¹ g_q`, so that
-/// `Bᵀ A⁻¹ B = UᵀU`, `Bᵀ A⁻¹ g_q = Uᵀw` and `Δq = −L⁻ᵀ (w + U Δz)`.
-struct FrameBlocks {
-    l: DMatrix<f64>,
-    u: DMatrix<f64>,
-    w: DVector<f64>,
-    /// The damping added to `A`'s diagonal (for the predicted decrease).
-    damping: DVector<f64>,
-}
-
-/// One frame's Gauss–Newton blocks at the current state, undamped: the pose block `A` (coordinate
-/// targets and markers), the pose gradient and the pose–`z` coupling `B`.
-struct FrameLinear {
-    a: DMatrix<f64>,
-    gq: DVector<f64>,
-    b: DMatrix<f64>,
-}
-
-/// The whole problem linearised at the current state: kept while Levenberg–Marquardt rejects
-/// steps (only the damping changes), rebuilt after an accepted one.
-struct Linear {
-    /// `C + Σ_k C_k` over `z` (priors, and each frame's scale and offset blocks).
-    c: DMatrix<f64>,
-    /// `−g_z`.
-    neg_gz: DVector<f64>,
-    frames: Vec<FrameLinear>,
-}
-
-/// The reduced system `S`, `Σ_k Uᵀw` and each frame's blocks ([`JointProblem::eliminate`]).
-type Eliminated = (DMatrix<f64>, DVector<f64>, Vec<Option<FrameBlocks>>);
-
-/// Frames per piece of the parallel elimination. Fixed, so that the pieces' partial sums (added
-/// in piece order) and hence every bit of the result do not depend on the thread count.
-const ELIMINATION_PIECE: usize = 8;
-
 impl JointProblem<'_> {
-    fn scale_indices(&self) -> (Vec<usize>, Vec<usize>) {
-        let np = self.proxy.np();
-        let scale = (0..np).filter(|&k| self.proxy.proxies[k].kind == ProxyKind::Scale).collect();
-        let pose = (0..np).filter(|&k| self.proxy.proxies[k].kind != ProxyKind::Scale).collect();
-        (scale, pose)
-    }
-
-    fn model_with(&self, offsets: &[Vector3<f64>]) -> Model {
+    pub(super) fn model_with(&self, offsets: &[Vector3<f64>]) -> Model {
         let mut m = self.model.clone();
         for (mk, o) in m.markers.iter_mut().zip(offsets) {
             mk.offset = *o;
@@ -308,198 +267,6 @@ impl JointProblem<'_> {
         let g = Globals { p: &state.poses[0], scale, offsets: &state.offsets, offset_col: cols };
         e += self.terms.iter().map(|t| t.add(&g, None)).sum::<f64>();
         (e, if counted > 0 { rmse / counted as f64 } else { f64::NAN })
-    }
-
-    /// The Gauss–Newton blocks of every frame and of the priors at `state`.
-    fn linearize(
-        &self,
-        state: &JointState,
-        (scale, pose): (&[usize], &[usize]),
-        cols: &[Option<usize>],
-        nz: usize,
-    ) -> Linear {
-        let (ns, nq) = (scale.len(), pose.len());
-        let nm = self.model.markers.len();
-        let zero_w = vec![0.0; nm];
-        let model = self.model_with(&state.offsets);
-        let eval = Evaluator::new(&model, self.proxy);
-        let mut c = DMatrix::<f64>::zeros(nz, nz);
-        let mut neg_gz = DVector::<f64>::zeros(nz);
-        {
-            let g = Globals { p: &state.poses[0], scale, offsets: &state.offsets, offset_col: cols };
-            let mut gz = DVector::zeros(nz);
-            for t in self.terms {
-                t.add(&g, Some((&mut c, &mut gz)));
-            }
-            neg_gz -= gz;
-        }
-        // Frames in pieces of [`ELIMINATION_PIECE`] in parallel, each piece with its own
-        // workspace and partial sums, added in piece order (the same bits whatever the threads).
-        use rayon::prelude::*;
-        let idx: Vec<usize> = (0..self.frames.len()).collect();
-        let pieces: Vec<(DMatrix<f64>, DVector<f64>, Vec<FrameLinear>)> = idx
-            .par_chunks(ELIMINATION_PIECE)
-            .map(|piece| {
-                let mut ws = EvalWorkspace::new(&model, self.proxy);
-                let mut c = DMatrix::<f64>::zeros(nz, nz);
-                let mut neg_gz = DVector::<f64>::zeros(nz);
-                let mut frames = Vec::with_capacity(piece.len());
-                for &k in piece {
-                    let (obs, p, mw) = (self.frames[k], &state.poses[k], self.weights[k]);
-                    // Coordinate targets alone (marker weights 0) give the tracking part of H and g.
-                    let tp = FrameProblem {
-                        observed: obs,
-                        marker_weights: &zero_w,
-                        tracking_ref: self.tracking_refs[k],
-                        tracking_weights: self.tracking_weights[k],
-                    };
-                    eval.linearize(p, &tp, &mut ws);
-                    let mut a = ws.gn.h.select_rows(pose).select_columns(pose);
-                    let mut gq = ws.gn.g.select_rows(pose);
-                    let fp = FrameProblem { marker_weights: mw, ..tp };
-                    eval.energy(p, &fp, &mut ws);
-                    cpu::jacobian(&model, &eval.layout, &mut ws.kin);
-                    let jm = eval.marker_jacobian(&ws);
-                    // Rows of observed, weighted markers, scaled by √w.
-                    let rows: Vec<usize> =
-                        (0..nm).filter(|&m| mw[m] > 0.0 && obs[3 * m..3 * m + 3].iter().all(|v| !v.is_nan())).collect();
-                    let nr = 3 * rows.len();
-                    let mut jq = DMatrix::zeros(nr, nq);
-                    let mut js = DMatrix::zeros(nr, ns);
-                    let mut r = DVector::zeros(nr);
-                    for (i, &m) in rows.iter().enumerate() {
-                        let sw = mw[m].sqrt();
-                        for a in 0..3 {
-                            let row = 3 * m + a;
-                            r[3 * i + a] = sw * (ws.kin.markers[row] - obs[row]);
-                            for (c, &k) in pose.iter().enumerate() {
-                                jq[(3 * i + a, c)] = sw * jm[(row, k)];
-                            }
-                            for (c, &k) in scale.iter().enumerate() {
-                                js[(3 * i + a, c)] = sw * jm[(row, k)];
-                            }
-                        }
-                    }
-                    fixed::add_t_mul_sym_tiled(&mut a, 1.0, &jq);
-                    gq += fixed::t_mul_v(&jq, &r);
-                    // Scale part.
-                    let g_s = fixed::t_mul_v(&js, &r);
-                    let mut b = DMatrix::zeros(nq, nz);
-                    fixed::add_t_mul(&mut b, (0, 0), 1.0, &jq, &js);
-                    fixed::add_t_mul_sym(&mut c, 0, 1.0, &js);
-                    neg_gz.rows_mut(0, ns).sub_assign(&g_s);
-                    // Offset parts: marker m's rows depend on its own offset through R_b diag(s_b), a
-                    // 3 × 3 block per marker: `B`'s columns `jq_mᵀ J_o`, and on the diagonal of `C`.
-                    for (i, &m) in rows.iter().enumerate() {
-                        let Some(col) = cols[m] else { continue };
-                        let bdy = model.markers[m].body;
-                        let sb = Vector3::new(
-                            ws.y[model.scale_index(bdy, 0)],
-                            ws.y[model.scale_index(bdy, 1)],
-                            ws.y[model.scale_index(bdy, 2)],
-                        );
-                        let sw = mw[m].sqrt();
-                        let jo: Matrix3<f64> = ws.kin.body_rot[bdy] * Matrix3::from_diagonal(&sb) * sw;
-                        for q in 0..nq {
-                            let jr = Vector3::new(jq[(3 * i, q)], jq[(3 * i + 1, q)], jq[(3 * i + 2, q)]);
-                            let v = jo.tr_mul(&jr);
-                            for a in 0..3 {
-                                b[(q, col + a)] = v[a];
-                            }
-                        }
-                        for sc in 0..ns {
-                            let jr = Vector3::new(js[(3 * i, sc)], js[(3 * i + 1, sc)], js[(3 * i + 2, sc)]);
-                            let v = jo.tr_mul(&jr);
-                            for a in 0..3 {
-                                c[(sc, col + a)] += v[a];
-                                c[(col + a, sc)] += v[a];
-                            }
-                        }
-                        let joo = jo.tr_mul(&jo);
-                        let r_m = Vector3::new(r[3 * i], r[3 * i + 1], r[3 * i + 2]);
-                        let g_o = jo.tr_mul(&r_m);
-                        for a in 0..3 {
-                            for bb in 0..3 {
-                                c[(col + a, col + bb)] += joo[(a, bb)];
-                            }
-                            neg_gz[col + a] -= g_o[a];
-                        }
-                    }
-                    // Poses at an end of their range that the gradient pushes beyond it stay there: the
-                    // step would be clipped, and the rest of the frame's step, computed as if it were
-                    // not, would then not be the model's minimiser (steps rejected one after another).
-                    for (i, &k) in pose.iter().enumerate() {
-                        let (lo, hi) = self.proxy.proxies[k].range;
-                        let tol = 1e-9 * (hi - lo).abs().max(1.0);
-                        if (p[k] <= lo + tol && gq[i] > 0.0) || (p[k] >= hi - tol && gq[i] < 0.0) {
-                            a.row_mut(i).fill(0.0);
-                            a.column_mut(i).fill(0.0);
-                            a[(i, i)] = 1.0;
-                            gq[i] = 0.0;
-                            b.row_mut(i).fill(0.0);
-                        }
-                    }
-                    frames.push(FrameLinear { a, gq, b });
-                }
-                (c, neg_gz, frames)
-            })
-            .collect();
-        let mut frames = Vec::with_capacity(self.frames.len());
-        for (pc, pg, pf) in pieces {
-            c += pc;
-            neg_gz += pg;
-            frames.extend(pf);
-        }
-        Linear { c, neg_gz, frames }
-    }
-
-    /// Eliminates every frame's poses at damping `lambda`: the reduced system
-    /// `S = C − Σ_k UᵀU` (undamped in `z`), `Σ_k Uᵀw`, and each frame's blocks (`None` where its
-    /// damped pose block is not positive definite). Frames are eliminated in pieces of
-    /// [`ELIMINATION_PIECE`] in parallel, the pieces' sums added in order.
-    fn eliminate(&self, lin: &Linear, lambda: f64) -> Eliminated {
-        use rayon::prelude::*;
-        let nz = lin.c.nrows();
-        let floor = self.settings.damping_floor;
-        let pieces: Vec<Eliminated> = lin
-            .frames
-            .par_chunks(ELIMINATION_PIECE)
-            .map(|piece| {
-                let mut s = DMatrix::<f64>::zeros(nz, nz);
-                let mut reduced = DVector::<f64>::zeros(nz);
-                let mut blocks = Vec::with_capacity(piece.len());
-                for f in piece {
-                    let nq = f.a.nrows();
-                    let mut a = f.a.clone();
-                    let damping = DVector::from_fn(nq, |d, _| lambda * a[(d, d)].max(floor));
-                    for d in 0..nq {
-                        a[(d, d)] += damping[d];
-                    }
-                    let Some(chol) = a.cholesky() else {
-                        blocks.push(None);
-                        continue;
-                    };
-                    let l = chol.unpack();
-                    let mut u = f.b.clone();
-                    l.solve_lower_triangular_unchecked_mut(&mut u);
-                    let mut w = f.gq.clone();
-                    l.solve_lower_triangular_unchecked_mut(&mut w);
-                    fixed::add_t_mul_sym_tiled(&mut s, -1.0, &u);
-                    reduced += fixed::t_mul_v(&u, &w);
-                    blocks.push(Some(FrameBlocks { l, u, w, damping }));
-                }
-                (s, reduced, blocks)
-            })
-            .collect();
-        let mut schur = lin.c.clone();
-        let mut reduced = DVector::<f64>::zeros(nz);
-        let mut blocks = Vec::with_capacity(lin.frames.len());
-        for (s, r, b) in pieces {
-            schur += s;
-            reduced += r;
-            blocks.extend(b);
-        }
-        (schur, reduced, blocks)
     }
 
     /// Levenberg–Marquardt on all unknowns, the poses eliminated by their Schur complement.
@@ -634,8 +401,6 @@ impl JointProblem<'_> {
         JointOutcome { iterations: iterations - rejected, rejected, energy, rmse_m: rmse }
     }
 }
-
-use std::ops::SubAssign;
 
 /// Calibrates the scale proxies (offsets fixed) on `frames` (observed marker arrays,
 /// `3·marker + axis`, NaN gaps). `frame_template` supplies weights and tracking arrays (its
@@ -819,6 +584,25 @@ impl Tracker {
             multi_start(solver, &fp, &mut self.p, &self.p0)
         };
         self.warm = st.status != super::FrameStatus::TooFewMarkers;
+        &self.p
+    }
+
+    /// [`Tracker::step`] with at most `iterations` trust-region iterations when warm-started
+    /// (a frame that only carries the pose forward to the next); a cold start (several starts)
+    /// is solved in full.
+    pub fn step_limited(
+        &mut self,
+        solver: &mut FrameSolver<'_>,
+        obs: &[f64],
+        frame_template: &FrameProblem<'_>,
+        iterations: u32,
+    ) -> &[f64] {
+        let full = solver.settings.max_iterations;
+        if self.warm {
+            solver.settings.max_iterations = iterations.min(full);
+        }
+        self.step(solver, obs, frame_template);
+        solver.settings.max_iterations = full;
         &self.p
     }
 

@@ -181,6 +181,142 @@ pub fn add_t_mul_sym_tiled(out: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>)
     }
 }
 
+/// [`add_t_mul_sym_tiled`] skipping the rows where a tile's columns are exactly zero: each
+/// column's non-zero rows are a bit mask (`a` at most 64 rows; taller matrices go to the dense
+/// product), and each 4 × 4 tile of outputs sums only over the rows where some column of its
+/// left four and some of its right four are non-zero, in increasing order. A skipped row only
+/// adds `±0` products to a sum that starts at `+0` (never `−0`), so the result is bit for bit
+/// [`add_t_mul_sym_tiled`]'s (a matrix holding a non-finite value goes to it whole). The
+/// calibration's reduced system uses it: with the poses ordered leaves first, `U = L⁻¹B`'s column
+/// of a marker is non-zero only on the pose proxies that move it (its chain to the root), and two
+/// markers on different limbs share only the root's and trunk's.
+pub fn add_t_mul_sym_sparse(out: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>) {
+    let (n, m) = (a.nrows(), a.ncols());
+    if n > 64 || a.iter().any(|v| !v.is_finite()) {
+        return add_t_mul_sym_tiled(out, alpha, a);
+    }
+    assert_eq!((out.nrows(), out.ncols()), (m, m), "add_t_mul_sym_sparse: out is not {m}×{m}");
+    let data = a.as_slice();
+    let c = |j: usize| &data[j * n..(j + 1) * n];
+    let mask = |j: usize| -> u64 {
+        let mut bits = 0u64;
+        for (k, v) in c(j).iter().enumerate() {
+            if *v != 0.0 {
+                bits |= 1 << k;
+            }
+        }
+        bits
+    };
+    let masks: Vec<u64> = (0..m).map(mask).collect();
+    let tiles: Vec<u64> = masks.chunks(4).map(|t| t.iter().fold(0, |a, b| a | b)).collect();
+    let mut tile = [[0.0f64; 4]; 4];
+    let mut j0 = 0;
+    while j0 < m {
+        let jw = (m - j0).min(4);
+        let mut i0 = 0;
+        while i0 <= j0 {
+            let iw = (m - i0).min(4);
+            let rows = tiles[i0 / 4] & tiles[j0 / 4];
+            if rows == 0 {
+                i0 += 4;
+                continue;
+            }
+            if iw == 4 && jw == 4 {
+                let (a0, a1, a2, a3) = (c(i0), c(i0 + 1), c(i0 + 2), c(i0 + 3));
+                let (b0, b1, b2, b3) = (c(j0), c(j0 + 1), c(j0 + 2), c(j0 + 3));
+                let mut s = [[0.0f64; 4]; 4];
+                let mut bits = rows;
+                while bits != 0 {
+                    let k = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    let (x0, x1, x2, x3) = (a0[k], a1[k], a2[k], a3[k]);
+                    let (y0, y1, y2, y3) = (b0[k], b1[k], b2[k], b3[k]);
+                    s[0][0] += x0 * y0;
+                    s[0][1] += x0 * y1;
+                    s[0][2] += x0 * y2;
+                    s[0][3] += x0 * y3;
+                    s[1][0] += x1 * y0;
+                    s[1][1] += x1 * y1;
+                    s[1][2] += x1 * y2;
+                    s[1][3] += x1 * y3;
+                    s[2][0] += x2 * y0;
+                    s[2][1] += x2 * y1;
+                    s[2][2] += x2 * y2;
+                    s[2][3] += x2 * y3;
+                    s[3][0] += x3 * y0;
+                    s[3][1] += x3 * y1;
+                    s[3][2] += x3 * y2;
+                    s[3][3] += x3 * y3;
+                }
+                tile = s;
+            } else {
+                for (di, row) in tile.iter_mut().enumerate().take(iw) {
+                    for (dj, v) in row.iter_mut().enumerate().take(jw) {
+                        let (x, y) = (c(i0 + di), c(j0 + dj));
+                        let mut s = 0.0;
+                        let mut bits = masks[i0 + di] & masks[j0 + dj];
+                        while bits != 0 {
+                            let k = bits.trailing_zeros() as usize;
+                            bits &= bits - 1;
+                            s += x[k] * y[k];
+                        }
+                        *v = s;
+                    }
+                }
+            }
+            for (di, row) in tile.iter().enumerate().take(iw) {
+                for (dj, v) in row.iter().enumerate().take(jw) {
+                    let (i, j) = (i0 + di, j0 + dj);
+                    if i < j {
+                        out[(i, j)] += alpha * v;
+                        out[(j, i)] += alpha * v;
+                    } else if i == j {
+                        out[(i, j)] += alpha * v;
+                    }
+                }
+            }
+            i0 += 4;
+        }
+        j0 += 4;
+    }
+}
+
+/// `b ← L⁻¹ b` for lower-triangular `l` (square, `b.nrows()` rows), column by column as
+/// nalgebra's `solve_lower_triangular_unchecked_mut` does it (`x_k /= L_kk`, then
+/// `x_i −= L_ik x_k` for `i > k`, in increasing `k`), skipping the exact zeros: an `x_k` that is
+/// zero, and the rows where `L`'s column `k` is. The result is nalgebra's but for the sign of
+/// zeros (with a non-finite value anywhere, nalgebra's solve runs instead); with the poses ordered leaves first (`solve::calibrate`), a marker's column has
+/// non-zeros only on its chain to the root and `L` no fill, so most of the work is skipped.
+pub fn solve_lower_sparse(l: &DMatrix<f64>, b: &mut DMatrix<f64>) {
+    let n = l.nrows();
+    assert!(l.ncols() == n && b.nrows() == n, "solve_lower_sparse: shapes");
+    if l.iter().chain(b.iter()).any(|v| !v.is_finite()) {
+        l.solve_lower_triangular_unchecked_mut(b);
+        return;
+    }
+    let ld = l.as_slice();
+    // Below-diagonal non-zero rows of each column of `l`.
+    let mut below: Vec<usize> = Vec::with_capacity(n * n / 2);
+    let mut start = Vec::with_capacity(n + 1);
+    for k in 0..n {
+        start.push(below.len());
+        below.extend((k + 1..n).filter(|&i| ld[k * n + i] != 0.0));
+    }
+    start.push(below.len());
+    for x in b.as_mut_slice().chunks_exact_mut(n.max(1)) {
+        for k in 0..n {
+            if x[k] == 0.0 {
+                continue;
+            }
+            let v = x[k] / ld[k * n + k];
+            x[k] = v;
+            for &i in &below[start[k]..start[k + 1]] {
+                x[i] -= ld[k * n + i] * v;
+            }
+        }
+    }
+}
+
 /// `aᵀ v` (each entry one sum in increasing row order).
 pub fn t_mul_v(a: &DMatrix<f64>, v: &DVector<f64>) -> DVector<f64> {
     assert_eq!(a.nrows(), v.len(), "t_mul_v: ({}×{})ᵀ · {}", a.nrows(), a.ncols(), v.len());
@@ -224,5 +360,42 @@ mod tests {
         add_t_mul_sym_tiled(&mut t3, 2.0, &narrow);
         assert_eq!(t3, narrow.transpose() * &narrow * 2.0);
         assert_eq!(t_mul_v(&a, &v.rows(0, 7).into_owned()), a.transpose() * v.rows(0, 7));
+    }
+
+    #[test]
+    fn the_sparse_symmetric_product_is_the_dense_one_bit_for_bit() {
+        // Irrational-ish values with exact zeros in blocks (as `L⁻¹B` has them), ragged tiles,
+        // and a matrix holding a NaN (the dense product's, which propagates it).
+        let zero = |i: usize, j: usize| (i * 7 + j * 3) % 5 < 2 || (j > 9 && i < 20);
+        let a = DMatrix::from_fn(37, 23, |i, j| if zero(i, j) { 0.0 } else { ((i * 13 + j) as f64).sin() * 1e3 });
+        for alpha in [1.0, -1.0, 0.3] {
+            let mut dense = DMatrix::from_fn(23, 23, |i, j| ((i + j) as f64).cos());
+            let mut sparse = dense.clone();
+            add_t_mul_sym_tiled(&mut dense, alpha, &a);
+            add_t_mul_sym_sparse(&mut sparse, alpha, &a);
+            assert!(dense.iter().zip(sparse.iter()).all(|(d, s)| d.to_bits() == s.to_bits()));
+        }
+        let mut b = a.clone();
+        b[(5, 4)] = f64::NAN;
+        let (mut dense, mut sparse) = (DMatrix::zeros(23, 23), DMatrix::zeros(23, 23));
+        add_t_mul_sym_tiled(&mut dense, -1.0, &b);
+        add_t_mul_sym_sparse(&mut sparse, -1.0, &b);
+        assert!(dense.iter().zip(sparse.iter()).all(|(d, s)| d.to_bits() == s.to_bits() || (d.is_nan() && s.is_nan())));
+    }
+
+    #[test]
+    fn the_sparse_triangular_solve_is_nalgebras() {
+        // A lower factor with structural zeros (no fill), and right-hand sides with zero runs.
+        let l = DMatrix::from_fn(9, 9, |i, j| match (i, j) {
+            (i, j) if i == j => 1.5 + i as f64 * 0.1,
+            (i, j) if i > j && (i + j) % 3 == 0 => ((i * 9 + j) as f64).sin(),
+            _ => 0.0,
+        });
+        let b = DMatrix::from_fn(9, 6, |i, j| if (i + 2 * j) % 4 == 1 { 0.0 } else { ((i + 11 * j) as f64).cos() });
+        let mut ours = b.clone();
+        solve_lower_sparse(&l, &mut ours);
+        let mut theirs = b.clone();
+        l.solve_lower_triangular_unchecked_mut(&mut theirs);
+        assert!(ours.iter().zip(theirs.iter()).all(|(a, b)| a == b));
     }
 }

@@ -9,6 +9,7 @@ pub mod placement;
 pub mod presolve;
 pub mod prior;
 pub mod qp;
+mod schur;
 pub mod settings;
 pub mod trqp;
 

@@ -1,0 +1,271 @@
+//! The Schur complement of calibration's joint solve ([`super::calibrate::JointProblem`]): each
+//! frame linearised (its Gauss–Newton blocks over the poses, scales and registered offsets) and
+//! its poses eliminated, leaving the dense reduced system over `z = [s; o]`.
+//!
+//! The poses are ordered leaves first, so that a frame's pose block factors without fill and
+//! `U = L⁻¹B` keeps each marker's column zero off the pose proxies that move it (its chain to the
+//! root); the triangular solve and `UᵀU` skip those zeros ([`fixed::solve_lower_sparse`],
+//! [`fixed::add_t_mul_sym_sparse`]) with the dense products' bits. Frames are linearised and
+//! eliminated in parallel in fixed pieces whose sums are added in piece order, so the result
+//! does not depend on the thread count (docs/CALIBRATION.md, "The solver").
+
+use super::calibrate::{JointProblem, JointState};
+use super::fixed;
+use super::prior::Globals;
+use crate::kinematics::assembly::{EvalWorkspace, Evaluator, FrameProblem};
+use crate::model::proxy::ProxyKind;
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+
+/// Per-frame blocks of the Schur complement: `A = L Lᵀ`, `U = L⁻¹ B`, `w = L⁻¹ g_q`, so that
+/// `Bᵀ A⁻¹ B = UᵀU`, `Bᵀ A⁻¹ g_q = Uᵀw` and `Δq = −L⁻ᵀ (w + U Δz)`.
+pub(super) struct FrameBlocks {
+    pub(super) l: DMatrix<f64>,
+    pub(super) u: DMatrix<f64>,
+    pub(super) w: DVector<f64>,
+    /// The damping added to `A`'s diagonal (for the predicted decrease).
+    pub(super) damping: DVector<f64>,
+}
+
+/// One frame's Gauss–Newton blocks at the current state, undamped: the pose block `A` (coordinate
+/// targets and markers), the pose gradient and the pose–`z` coupling `B`.
+pub(super) struct FrameLinear {
+    pub(super) a: DMatrix<f64>,
+    pub(super) gq: DVector<f64>,
+    pub(super) b: DMatrix<f64>,
+}
+
+/// The whole problem linearised at the current state: kept while Levenberg–Marquardt rejects
+/// steps (only the damping changes), rebuilt after an accepted one.
+pub(super) struct Linear {
+    /// `C + Σ_k C_k` over `z` (priors, and each frame's scale and offset blocks).
+    pub(super) c: DMatrix<f64>,
+    /// `−g_z`.
+    pub(super) neg_gz: DVector<f64>,
+    pub(super) frames: Vec<FrameLinear>,
+}
+
+/// The reduced system `S`, `Σ_k Uᵀw` and each frame's blocks ([`JointProblem::eliminate`]).
+pub(super) type Eliminated = (DMatrix<f64>, DVector<f64>, Vec<Option<FrameBlocks>>);
+
+/// Frames per piece of the parallel elimination. Fixed, so that the pieces' partial sums (added
+/// in piece order) and hence every bit of the result do not depend on the thread count.
+const ELIMINATION_PIECE: usize = 8;
+
+impl JointProblem<'_> {
+    pub(super) fn scale_indices(&self) -> (Vec<usize>, Vec<usize>) {
+        let np = self.proxy.np();
+        let scale = (0..np).filter(|&k| self.proxy.proxies[k].kind == ProxyKind::Scale).collect();
+        let mut pose: Vec<usize> = (0..np).filter(|&k| self.proxy.proxies[k].kind != ProxyKind::Scale).collect();
+        // Leaves first: each pose proxy after every proxy that moves a body below it, so that
+        // a frame's Cholesky factor has no fill and `U = L⁻¹B` keeps each marker's column zero
+        // off its chain to the root ([`fixed::solve_lower_sparse`], [`fixed::add_t_mul_sym_sparse`]).
+        let depth = self.pose_depths();
+        pose.sort_by_key(|&k| std::cmp::Reverse(depth[k]));
+        (scale, pose)
+    }
+
+    /// Per proxy: the depth in the body tree (bodies on its root chain) of the highest body whose
+    /// joint coordinates it drives (`usize::MAX` for a proxy that drives none).
+    fn pose_depths(&self) -> Vec<usize> {
+        let model = self.model;
+        let mut body_of = vec![None; model.nq()];
+        for (b, body) in model.bodies.iter().enumerate() {
+            for m in body.joint.motions.clone() {
+                if let Some(c) = model.motions[m].coordinate {
+                    body_of[c] = Some(b);
+                }
+            }
+        }
+        let mut depth = vec![usize::MAX; self.proxy.np()];
+        for t in &self.proxy.terms {
+            if let Some(Some(b)) = body_of.get(t.y_index) {
+                depth[t.proxy] = depth[t.proxy].min(model.chain(*b).len());
+            }
+        }
+        depth
+    }
+
+    /// The Gauss–Newton blocks of every frame and of the priors at `state`.
+    pub(super) fn linearize(
+        &self,
+        state: &JointState,
+        (scale, pose): (&[usize], &[usize]),
+        cols: &[Option<usize>],
+        nz: usize,
+    ) -> Linear {
+        let nq = pose.len();
+        let model = self.model_with(&state.offsets);
+        let eval = Evaluator::new(&model, self.proxy);
+        let mut c = DMatrix::<f64>::zeros(nz, nz);
+        let mut neg_gz = DVector::<f64>::zeros(nz);
+        {
+            let g = Globals { p: &state.poses[0], scale, offsets: &state.offsets, offset_col: cols };
+            let mut gz = DVector::zeros(nz);
+            for t in self.terms {
+                t.add(&g, Some((&mut c, &mut gz)));
+            }
+            neg_gz -= gz;
+        }
+        // Frames in pieces of [`ELIMINATION_PIECE`] in parallel, each piece with its own
+        // workspace and partial sums, added in piece order (the same bits whatever the threads).
+        use rayon::prelude::*;
+        let registered = cols.iter().any(Option::is_some);
+        // Each proxy's row among the poses and column among the scales.
+        let mut pose_row = vec![None; self.proxy.np()];
+        let mut scale_col = vec![None; self.proxy.np()];
+        pose.iter().enumerate().for_each(|(i, &k)| pose_row[k] = Some(i));
+        scale.iter().enumerate().for_each(|(i, &k)| scale_col[k] = Some(i));
+        let idx: Vec<usize> = (0..self.frames.len()).collect();
+        let pieces: Vec<(DMatrix<f64>, DVector<f64>, Vec<FrameLinear>)> = idx
+            .par_chunks(ELIMINATION_PIECE)
+            .map(|piece| {
+                let mut ws = EvalWorkspace::new(&model, self.proxy);
+                let mut c = DMatrix::<f64>::zeros(nz, nz);
+                let mut neg_gz = DVector::<f64>::zeros(nz);
+                let mut frames = Vec::with_capacity(piece.len());
+                for &k in piece {
+                    let (obs, p, mw) = (self.frames[k], &state.poses[k], self.weights[k]);
+                    // The frame's Gauss–Newton model over all proxies (markers and coordinate
+                    // targets, per body as the frame solver forms it): `A`, `g_q`, and the scale
+                    // columns of `B`, `C` and `g_z`.
+                    let fp = FrameProblem {
+                        observed: obs,
+                        marker_weights: mw,
+                        tracking_ref: self.tracking_refs[k],
+                        tracking_weights: self.tracking_weights[k],
+                    };
+                    eval.linearize(p, &fp, &mut ws);
+                    let h = &ws.gn.h;
+                    let (hs, np) = (h.as_slice(), h.nrows());
+                    let mut a = DMatrix::zeros(nq, nq);
+                    for (col, &kj) in a.as_mut_slice().chunks_exact_mut(nq).zip(pose) {
+                        let hj = &hs[kj * np..(kj + 1) * np];
+                        for (v, &ki) in col.iter_mut().zip(pose) {
+                            *v = hj[ki];
+                        }
+                    }
+                    let mut gq = DVector::from_iterator(nq, pose.iter().map(|&k| ws.gn.g[k]));
+                    let mut b = DMatrix::zeros(nq, nz);
+                    for (c_, &ks) in scale.iter().enumerate() {
+                        for (r_, &kq) in pose.iter().enumerate() {
+                            b[(r_, c_)] = h[(kq, ks)];
+                        }
+                        for (r_, &kr) in scale.iter().enumerate() {
+                            c[(r_, c_)] += h[(kr.min(ks), kr.max(ks))];
+                        }
+                        neg_gz[c_] -= ws.gn.g[ks];
+                    }
+                    // Offset parts: marker m's rows depend on its own offset through
+                    // `J_o = R_b diag(s_b)`, a 3 × 3 block per marker: `B`'s columns `w J_qᵀ J_o`,
+                    // `C`'s `w J_sᵀ J_o` and `w J_oᵀ J_o`, and `g_o = w J_oᵀ r`.
+                    if registered {
+                        eval.marker_rows(&fp, &mut ws, |m, proxies, rows, kin, y| {
+                            let Some(col) = cols[m] else { return };
+                            let w = mw[m];
+                            let bdy = model.markers[m].body;
+                            let sb = Vector3::from_fn(|ax, _| y[model.scale_index(bdy, ax)]);
+                            let jo: Matrix3<f64> = kin.body_rot[bdy] * Matrix3::from_diagonal(&sb);
+                            for (slot, &k) in proxies.iter().enumerate() {
+                                let jr = Vector3::new(rows[3 * slot], rows[3 * slot + 1], rows[3 * slot + 2]);
+                                let v = jo.tr_mul(&jr) * w;
+                                if let Some(q) = pose_row[k] {
+                                    for ax in 0..3 {
+                                        b[(q, col + ax)] = v[ax];
+                                    }
+                                } else if let Some(sc) = scale_col[k] {
+                                    for ax in 0..3 {
+                                        c[(sc, col + ax)] += v[ax];
+                                        c[(col + ax, sc)] += v[ax];
+                                    }
+                                }
+                            }
+                            let joo = jo.tr_mul(&jo) * w;
+                            let row = 3 * m;
+                            let r_m = Vector3::from_fn(|ax, _| kin.markers[row + ax] - obs[row + ax]);
+                            let g_o = jo.tr_mul(&r_m) * w;
+                            for ax in 0..3 {
+                                for bb in 0..3 {
+                                    c[(col + ax, col + bb)] += joo[(ax, bb)];
+                                }
+                                neg_gz[col + ax] -= g_o[ax];
+                            }
+                        });
+                    }
+                    // Poses at an end of their range that the gradient pushes beyond it stay there: the
+                    // step would be clipped, and the rest of the frame's step, computed as if it were
+                    // not, would then not be the model's minimiser (steps rejected one after another).
+                    for (i, &k) in pose.iter().enumerate() {
+                        let (lo, hi) = self.proxy.proxies[k].range;
+                        let tol = 1e-9 * (hi - lo).abs().max(1.0);
+                        if (p[k] <= lo + tol && gq[i] > 0.0) || (p[k] >= hi - tol && gq[i] < 0.0) {
+                            a.row_mut(i).fill(0.0);
+                            a.column_mut(i).fill(0.0);
+                            a[(i, i)] = 1.0;
+                            gq[i] = 0.0;
+                            b.row_mut(i).fill(0.0);
+                        }
+                    }
+                    frames.push(FrameLinear { a, gq, b });
+                }
+                (c, neg_gz, frames)
+            })
+            .collect();
+        let mut frames = Vec::with_capacity(self.frames.len());
+        for (pc, pg, pf) in pieces {
+            c += pc;
+            neg_gz += pg;
+            frames.extend(pf);
+        }
+        Linear { c, neg_gz, frames }
+    }
+
+    /// Eliminates every frame's poses at damping `lambda`: the reduced system
+    /// `S = C − Σ_k UᵀU` (undamped in `z`), `Σ_k Uᵀw`, and each frame's blocks (`None` where its
+    /// damped pose block is not positive definite). Frames are eliminated in pieces of
+    /// [`ELIMINATION_PIECE`] in parallel, the pieces' sums added in order.
+    pub(super) fn eliminate(&self, lin: &Linear, lambda: f64) -> Eliminated {
+        use rayon::prelude::*;
+        let nz = lin.c.nrows();
+        let floor = self.settings.damping_floor;
+        let pieces: Vec<Eliminated> = lin
+            .frames
+            .par_chunks(ELIMINATION_PIECE)
+            .map(|piece| {
+                let mut s = DMatrix::<f64>::zeros(nz, nz);
+                let mut reduced = DVector::<f64>::zeros(nz);
+                let mut blocks = Vec::with_capacity(piece.len());
+                for f in piece {
+                    let nq = f.a.nrows();
+                    let mut a = f.a.clone();
+                    let damping = DVector::from_fn(nq, |d, _| lambda * a[(d, d)].max(floor));
+                    for d in 0..nq {
+                        a[(d, d)] += damping[d];
+                    }
+                    let Some(chol) = a.cholesky() else {
+                        blocks.push(None);
+                        continue;
+                    };
+                    let l = chol.unpack();
+                    let mut u = f.b.clone();
+                    fixed::solve_lower_sparse(&l, &mut u);
+                    let mut w = f.gq.clone();
+                    l.solve_lower_triangular_unchecked_mut(&mut w);
+                    fixed::add_t_mul_sym_sparse(&mut s, -1.0, &u);
+
+                    reduced += fixed::t_mul_v(&u, &w);
+                    blocks.push(Some(FrameBlocks { l, u, w, damping }));
+                }
+                (s, reduced, blocks)
+            })
+            .collect();
+        let mut schur = lin.c.clone();
+        let mut reduced = DVector::<f64>::zeros(nz);
+        let mut blocks = Vec::with_capacity(lin.frames.len());
+        for (s, r, b) in pieces {
+            schur += s;
+            reduced += r;
+            blocks.extend(b);
+        }
+        (schur, reduced, blocks)
+    }
+}
