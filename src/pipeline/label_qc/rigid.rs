@@ -34,13 +34,21 @@ pub(crate) fn tree_distance(model: &Model, a: usize, b: usize) -> usize {
     usize::MAX
 }
 
+/// [`tree_distance`] between every two bodies, row-major (`nb × nb`): computed once per trial
+/// rather than once per marker pair.
+pub(crate) fn body_distances(model: &Model) -> Vec<usize> {
+    let nb = model.bodies.len();
+    (0..nb * nb).map(|k| tree_distance(model, k / nb, k % nb)).collect()
+}
+
 /// Candidate pairs among the `used` markers: on one body or bodies at most two joints apart.
 pub(crate) fn candidate_pairs(model: &Model, used: &[bool]) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
     let markers = &model.markers;
+    let (nb, joints) = (model.bodies.len(), body_distances(model));
     for (a, ma) in markers.iter().enumerate().filter(|(a, _)| used[*a]) {
         for (b, mb) in markers.iter().enumerate().skip(a + 1).filter(|(b, _)| used[*b]) {
-            if tree_distance(model, ma.body, mb.body) <= 2 {
+            if joints[ma.body * nb + mb.body] <= 2 {
                 out.push((a, b));
             }
         }
@@ -78,14 +86,15 @@ impl PairSampler {
     /// The rigid pairs: sampled in at least 10 frames, robust spread at most `rigid_sd_mm`.
     pub(crate) fn rigid(mut self, settings: &LabelQcSettings) -> Vec<Pair> {
         let mut out = Vec::new();
+        let mut keys = Vec::new();
         for (k, &(a, b)) in self.pairs.iter().enumerate() {
             let s = &mut self.samples[k];
             if s.len() < 10 {
                 continue;
             }
-            let med = median(s);
-            let mut dev: Vec<f64> = s.iter().map(|d| (d - med).abs()).collect();
-            let sd = 1.4826 * median(&mut dev);
+            // Distances and their deviations are finite and at least +0.
+            let med = median_nonnegative(s.iter().copied(), &mut keys);
+            let sd = 1.4826 * median_nonnegative(s.iter().map(|d| (d - med).abs()), &mut keys);
             if sd <= settings.rigid_sd_mm * 1e-3 {
                 out.push(Pair { a, b, reference: med, tolerance: settings.noise_sds * sd.max(1e-3) });
             }
@@ -100,3 +109,28 @@ pub(crate) fn distance(p: &[f64; 3], q: &[f64; 3]) -> f64 {
 }
 
 pub(crate) use crate::solve::median;
+
+/// The [`median`] of `values`, all of them +0 or more and not NaN (`keys`: scratch). The same
+/// value as [`median`] gives: on such values the order of their bit patterns as integers is
+/// their order as numbers (and [`f64::total_cmp`]'s), and integers select several times faster
+/// than floats compared by `total_cmp` (the reference distances' medians were ~1.6 % of a
+/// synthetic conversion's CPU).
+pub(crate) fn median_nonnegative(values: impl Iterator<Item = f64>, keys: &mut Vec<u64>) -> f64 {
+    keys.clear();
+    keys.extend(values.map(|v| {
+        debug_assert!(v.is_sign_positive() && !v.is_nan(), "{v} is not +0 or more");
+        v.to_bits()
+    }));
+    let n = keys.len();
+    if n == 0 {
+        return f64::NAN;
+    }
+    let (lower, mid, _) = keys.select_nth_unstable(n / 2);
+    let mid = f64::from_bits(*mid);
+    if n % 2 == 1 {
+        mid
+    } else {
+        let below = lower.iter().copied().max().map_or(mid, f64::from_bits);
+        0.5 * (below + mid)
+    }
+}
