@@ -323,6 +323,15 @@ impl Screen {
                 }
                 fresh = true;
             }
+            // A marker's step is the second largest change of its pairs: with fewer than two
+            // pairs changed by more than a threshold of 0 or more (a clean frame), none steps.
+            let changed = (0..self.pairs.len())
+                .filter(|&k| (self.dist[k] - self.local[k]).abs() > self.step_threshold)
+                .take(2)
+                .count();
+            if changed < 2 && self.step_threshold >= 0.0 {
+                break;
+            }
             let mut pick: Option<(usize, f64)> = None;
             for m in 0..work.len() {
                 if self.partners[m].is_empty() {
