@@ -93,7 +93,7 @@ pub fn scan_trc(path: &Path, keep: usize) -> Result<(MarkerTrial, TrcRows), TrcE
         }
         p.offset = at;
         at += n as u64;
-        let line = String::from_utf8_lossy(trim_eol(&mut buf, eol));
+        let line = text_of(trim_eol(&mut buf, eol));
         lossy |= matches!(line, std::borrow::Cow::Owned(_));
         p.line(&line)?;
     }
@@ -105,6 +105,12 @@ pub fn scan_trc(path: &Path, keep: usize) -> Result<(MarkerTrial, TrcRows), TrcE
     }
     let n_markers = trial.n_markers();
     Ok((trial, TrcRows { file, path: path.to_path_buf(), rows, eol, per_m, n_markers }))
+}
+
+/// `bytes` as text, bad UTF-8 replaced (as `String::from_utf8_lossy`; valid UTF-8, the usual
+/// case, is checked faster than `from_utf8_lossy` walks it).
+fn text_of(bytes: &[u8]) -> std::borrow::Cow<'_, str> {
+    std::str::from_utf8(bytes).map_or_else(|_| String::from_utf8_lossy(bytes), std::borrow::Cow::Borrowed)
 }
 
 /// `buf` without its line break.
@@ -145,7 +151,7 @@ impl TrcRows {
                 if r.read_until(self.eol, &mut buf).map_err(io)? == 0 {
                     return Err(TrcError::NoData { file: self.file.clone(), line: line as usize });
                 }
-                let text = String::from_utf8_lossy(trim_eol(&mut buf, self.eol));
+                let text = text_of(trim_eol(&mut buf, self.eol));
                 if text.trim().is_empty() {
                     continue;
                 }

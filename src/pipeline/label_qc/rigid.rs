@@ -66,7 +66,8 @@ pub(crate) struct PairSampler {
 impl PairSampler {
     pub(crate) fn new(pairs: Vec<(usize, usize)>, frames: usize, settings: &LabelQcSettings) -> PairSampler {
         let stride = frames.div_ceil(settings.sample_frames.max(1)).max(1);
-        let samples = vec![Vec::new(); pairs.len()];
+        // Each pair's samples reserved once (no growth by reallocation, frame after frame).
+        let samples = vec![Vec::with_capacity(frames.div_ceil(stride)); pairs.len()];
         PairSampler { pairs, samples, stride }
     }
 
@@ -94,6 +95,14 @@ impl PairSampler {
             }
             // Distances and their deviations are finite and at least +0.
             let med = median_nonnegative(s.iter().copied(), &mut keys);
+            // Most candidate pairs are far from rigid: when fewer than half the deviations are
+            // within a hair above the limit, their median is above it, and so is `sd`; the
+            // pair is left without selecting the median deviation.
+            let limit = settings.rigid_sd_mm * 1e-3;
+            let within = limit / 1.4826 * (1.0 + 1e-9);
+            if limit >= 0.0 && s.iter().filter(|d| (*d - med).abs() <= within).count() < s.len() / 2 {
+                continue;
+            }
             let sd = 1.4826 * median_nonnegative(s.iter().map(|d| (d - med).abs()), &mut keys);
             if sd <= settings.rigid_sd_mm * 1e-3 {
                 out.push(Pair { a, b, reference: med, tolerance: settings.noise_sds * sd.max(1e-3) });
