@@ -67,7 +67,7 @@ impl PairSampler {
     pub(crate) fn new(pairs: Vec<(usize, usize)>, frames: usize, settings: &LabelQcSettings) -> PairSampler {
         let stride = frames.div_ceil(settings.sample_frames.max(1)).max(1);
         // Each pair's samples reserved once (no growth by reallocation, frame after frame).
-        let samples = vec![Vec::with_capacity(frames.div_ceil(stride)); pairs.len()];
+        let samples = pairs.iter().map(|_| Vec::with_capacity(frames.div_ceil(stride))).collect();
         PairSampler { pairs, samples, stride }
     }
 
