@@ -15,23 +15,35 @@ pub(crate) struct Pair {
     pub tolerance: f64,
 }
 
-/// Joints between two bodies of the tree.
+/// Joints between two bodies of the tree (`usize::MAX` when they share no root). Walks up
+/// from both to their common ancestor, without allocating.
 pub(crate) fn tree_distance(model: &Model, a: usize, b: usize) -> usize {
-    let chain = |mut x: usize| {
-        let mut c = vec![x];
-        while let Some(p) = model.bodies[x].parent {
-            c.push(p);
+    let parent = |x: usize| model.bodies[x].parent;
+    let depth = |mut x: usize| {
+        let mut d = 0;
+        while let Some(p) = parent(x) {
             x = p;
+            d += 1;
         }
-        c
+        d
     };
-    let (ca, cb) = (chain(a), chain(b));
-    for (i, x) in ca.iter().enumerate() {
-        if let Some(j) = cb.iter().position(|y| y == x) {
-            return i + j;
+    let (mut x, mut y, mut dx, mut dy) = (a, b, depth(a), depth(b));
+    let mut joints = 0;
+    while dx > dy {
+        x = parent(x).expect("deeper than its depth");
+        (dx, joints) = (dx - 1, joints + 1);
+    }
+    while dy > dx {
+        y = parent(y).expect("deeper than its depth");
+        (dy, joints) = (dy - 1, joints + 1);
+    }
+    while x != y {
+        match (parent(x), parent(y)) {
+            (Some(px), Some(py)) => (x, y, joints) = (px, py, joints + 2),
+            _ => return usize::MAX,
         }
     }
-    usize::MAX
+    joints
 }
 
 /// [`tree_distance`] between every two bodies, row-major (`nb × nb`): computed once per trial
