@@ -204,3 +204,48 @@ fn writing_frames_allocates_far_less_than_once_per_frame() {
     let _ = std::fs::remove_dir_all(&dir);
     assert!(allocated < 100, "{allocated} allocations in {} frames", n - 1);
 }
+
+/// Allocations of `f` on this thread.
+fn allocations_of(f: impl FnOnce()) -> usize {
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    f();
+    ALLOCATIONS.load(Ordering::Relaxed) - before
+}
+
+/// A synthetic trial of `n` frames written as a TRC file in `dir`.
+fn trc_of(ctx: &Context, n: usize, dir: &std::path::Path) -> std::path::PathBuf {
+    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: n, seed: 3, ..SynthOptions::default() });
+    let path = dir.join(format!("t{n}.trc"));
+    smocap::io::trc::write_trc(&path, &s.trial, "mm").unwrap();
+    path
+}
+
+#[test]
+fn reading_a_trc_allocates_no_more_for_more_rows() {
+    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _counted = Counted::on();
+    let ctx = Context::shipped().unwrap();
+    let dir = std::env::temp_dir().join(format!("smocap-alloc-trc-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (short, long) = (trc_of(&ctx, 500, &dir), trc_of(&ctx, 2000, &dir));
+    let a = allocations_of(|| drop(smocap::io::trc::read_trc(&short).unwrap()));
+    let b = allocations_of(|| drop(smocap::io::trc::read_trc(&long).unwrap()));
+    let _ = std::fs::remove_dir_all(&dir);
+    // The arrays are reserved once; the rows' cells reuse one buffer.
+    assert!(b <= a + 20, "500 rows: {a} allocations, 2000 rows: {b}");
+}
+
+#[test]
+fn the_label_screen_allocates_no_more_for_more_frames() {
+    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _counted = Counted::on();
+    let ctx = Context::shipped().unwrap();
+    let screen = |n: usize| {
+        let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: n, seed: 3, ..SynthOptions::default() });
+        let columns = smocap::pipeline::trial::match_markers(&ctx, "t", &s.trial).unwrap().columns;
+        allocations_of(|| drop(smocap::pipeline::label_qc::screen_trial(&ctx, &s.trial, &columns).unwrap()))
+    };
+    let (a, b) = (screen(500), screen(2000));
+    // Per rigid-pair candidate a sample buffer reserved once; per frame nothing (clean frames).
+    assert!(b <= a + 20, "500 frames: {a} allocations, 2000 frames: {b}");
+}

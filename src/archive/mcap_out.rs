@@ -503,8 +503,13 @@ impl<'a> TrialWriter<'a> {
         self.state.q.extend_from_slice(&self.y[..model.nq()]);
         // /tf: the frame's pose on the subject's calibrated scales (as the skeleton in /scene):
         // `world → model` (fixed), then each body in its parent.
-        self.y[model.nq()..].copy_from_slice(&self.calibrated_scale);
-        cpu::forward(model, &self.y, &mut self.ws);
+        // (When the frame's scales are the calibrated ones, bit for bit, the pose is already
+        // the one drawn: the same forward kinematics would give the same bodies.)
+        let same = |(a, b): (&f64, &f64)| a.to_bits() == b.to_bits();
+        if !self.y[model.nq()..].iter().zip(&self.calibrated_scale).all(same) {
+            self.y[model.nq()..].copy_from_slice(&self.calibrated_scale);
+            cpu::forward(model, &self.y, &mut self.ws);
+        }
         self.tf.transforms[0].timestamp = stamp;
         for b in 0..model.nb() {
             let (r, p) = relative(model, &self.ws, b);

@@ -93,7 +93,7 @@ pub fn scan_trc(path: &Path, keep: usize) -> Result<(MarkerTrial, TrcRows), TrcE
         }
         p.offset = at;
         at += n as u64;
-        let line = String::from_utf8_lossy(trim_eol(&mut buf, eol));
+        let line = text_of(trim_eol(&mut buf, eol));
         lossy |= matches!(line, std::borrow::Cow::Owned(_));
         p.line(&line)?;
     }
@@ -105,6 +105,12 @@ pub fn scan_trc(path: &Path, keep: usize) -> Result<(MarkerTrial, TrcRows), TrcE
     }
     let n_markers = trial.n_markers();
     Ok((trial, TrcRows { file, path: path.to_path_buf(), rows, eol, per_m, n_markers }))
+}
+
+/// `bytes` as text, bad UTF-8 replaced (as `String::from_utf8_lossy`; valid UTF-8, the usual
+/// case, is checked faster than `from_utf8_lossy` walks it).
+fn text_of(bytes: &[u8]) -> std::borrow::Cow<'_, str> {
+    std::str::from_utf8(bytes).map_or_else(|_| String::from_utf8_lossy(bytes), std::borrow::Cow::Borrowed)
 }
 
 /// `buf` without its line break.
@@ -145,7 +151,7 @@ impl TrcRows {
                 if r.read_until(self.eol, &mut buf).map_err(io)? == 0 {
                     return Err(TrcError::NoData { file: self.file.clone(), line: line as usize });
                 }
-                let text = String::from_utf8_lossy(trim_eol(&mut buf, self.eol));
+                let text = text_of(trim_eol(&mut buf, self.eol));
                 if text.trim().is_empty() {
                     continue;
                 }
@@ -172,6 +178,76 @@ fn cells(line: &str) -> Vec<&str> {
     } else {
         line.split_whitespace().collect()
     }
+}
+
+/// [`cells`] of `line` as byte ranges into it, into `out` (reused: no allocation per row).
+/// ASCII lines are split on bytes (the same cells: on ASCII, `char::is_whitespace` is
+/// [`is_space`]); others go through [`cells`].
+fn cell_spans(line: &str, out: &mut Vec<(usize, usize)>) {
+    out.clear();
+    if !line.is_ascii() {
+        let base = line.as_ptr() as usize;
+        out.extend(cells(line).iter().map(|c| {
+            let a = c.as_ptr() as usize - base;
+            (a, a + c.len())
+        }));
+        return;
+    }
+    let b = line.as_bytes();
+    if b.contains(&b'\t') {
+        let mut a = 0;
+        loop {
+            let end = b[a..].iter().position(|&c| c == b'\t').map_or(b.len(), |k| a + k);
+            let (mut x, mut y) = (a, end);
+            while x < y && is_space(b[x]) {
+                x += 1;
+            }
+            while y > x && is_space(b[y - 1]) {
+                y -= 1;
+            }
+            out.push((x, y));
+            if end == b.len() {
+                break;
+            }
+            a = end + 1;
+        }
+    } else {
+        let mut k = 0;
+        while k < b.len() {
+            while k < b.len() && is_space(b[k]) {
+                k += 1;
+            }
+            let x = k;
+            while k < b.len() && !is_space(b[k]) {
+                k += 1;
+            }
+            if k > x {
+                out.push((x, k));
+            }
+        }
+    }
+}
+
+/// A row's cells: `spans` into `row`.
+struct Cells<'a> {
+    row: &'a str,
+    spans: &'a [(usize, usize)],
+}
+
+impl<'a> Cells<'a> {
+    fn len(&self) -> usize {
+        self.spans.len()
+    }
+
+    fn get(&self, i: usize) -> Option<&'a str> {
+        self.spans.get(i).map(|&(a, b)| &self.row[a..b])
+    }
+}
+
+/// `char::is_whitespace` on an ASCII byte (tab, line feed, vertical tab, form feed, carriage
+/// return, space).
+fn is_space(c: u8) -> bool {
+    matches!(c, b'\t' | b'\n' | 0x0B | 0x0C | b'\r' | b' ')
 }
 
 /// Header name/value pairs of lines 2 and 3, tolerant of doubled tabs.
@@ -259,6 +335,8 @@ struct Parser {
     /// Data rows may carry more markers than line 4 names (a cut-off name row or an unlabelled
     /// export): the markers named and `NumMarkers`.
     widen: Option<(usize, Option<f64>)>,
+    /// The cells of the row being parsed (byte ranges), kept to reuse its allocation.
+    spans: Vec<(usize, usize)>,
 }
 
 impl Parser {
@@ -277,6 +355,7 @@ impl Parser {
             offset: 0,
             offsets: Vec::new(),
             widen: None,
+            spans: Vec::new(),
         }
     }
 
@@ -393,7 +472,6 @@ impl Parser {
         if row.trim().is_empty() {
             return Ok(());
         }
-        let per_m = self.header.as_ref().map_or(1.0, |h| h.per_m);
         let trial = &mut self.trial;
         let nm = trial.labels.len();
         if trial.times.is_empty() && self.keep > 0 {
@@ -405,7 +483,19 @@ impl Parser {
             trial.times.reserve_exact(rows);
             trial.frame_numbers.reserve_exact(rows);
         }
-        let c = cells(row);
+        let mut spans = std::mem::take(&mut self.spans);
+        cell_spans(row, &mut spans);
+        let out = self.row_cells(line, row, &spans);
+        self.spans = spans;
+        out
+    }
+
+    /// Parses data line `line` (1-based), `row`, whose cells are `spans`.
+    fn row_cells(&mut self, line: usize, row: &str, spans: &[(usize, usize)]) -> Result<(), TrcError> {
+        let trial = &mut self.trial;
+        let nm = trial.labels.len();
+        let per_m = self.header.as_ref().map_or(1.0, |h| h.per_m);
+        let c = Cells { row, spans };
         let file = &self.file;
         let non_numeric =
             |column: usize, value: &str| TrcError::NonNumeric { file: file.clone(), line, column, value: clip(value) };
@@ -417,9 +507,9 @@ impl Parser {
             widen_to(trial, (c.len() - 2).div_ceil(3), held);
         }
         let nm = trial.labels.len();
-        let frame_cell = c.first().copied().unwrap_or("");
+        let frame_cell = c.get(0).unwrap_or("");
         let frame = parse_frame(frame_cell).ok_or_else(|| non_numeric(1, frame_cell))?;
-        let time_cell = c.get(1).copied().unwrap_or("");
+        let time_cell = c.get(1).unwrap_or("");
         let time = time_cell.parse::<f64>().ok().filter(|t| t.is_finite()).ok_or_else(|| non_numeric(2, time_cell))?;
         if !self.time_warned && trial.times.last().is_some_and(|&prev| time <= prev) {
             self.warnings.push(format!("time does not increase at line {line}"));
@@ -429,7 +519,7 @@ impl Parser {
             let mut p = [f64::NAN; 3];
             for (axis, v) in p.iter_mut().enumerate() {
                 let col = 2 + 3 * m + axis;
-                let s = c.get(col).copied().unwrap_or("");
+                let s = c.get(col).unwrap_or("");
                 if s.is_empty() || s.eq_ignore_ascii_case("nan") {
                     continue;
                 }

@@ -2,7 +2,7 @@
 //! a marker is flagged — the exchanges of two labels that explain the misfit, then the markers
 //! that must be masked for what is left. Allocation-free per frame once built.
 
-use super::rigid::{distance, median, tree_distance, Pair};
+use super::rigid::{body_distances, distance, median, Pair};
 use crate::model::Model;
 
 /// What one frame's screen found.
@@ -56,6 +56,7 @@ impl Screen {
             partners[p.a].push(k);
             partners[p.b].push(k);
         }
+        let (nb, joints) = (model.bodies.len(), body_distances(model));
         let candidates = (0..nm)
             .map(|a| {
                 if !used[a] || partners[a].is_empty() {
@@ -64,9 +65,7 @@ impl Screen {
                 let mirror = mirror_of(model, a);
                 (0..nm)
                     .filter(|&b| b != a && used[b])
-                    .filter(|&b| {
-                        Some(b) == mirror || tree_distance(model, model.markers[a].body, model.markers[b].body) <= 1
-                    })
+                    .filter(|&b| Some(b) == mirror || joints[model.markers[a].body * nb + model.markers[b].body] <= 1)
                     .collect()
             })
             .collect();
@@ -149,11 +148,19 @@ impl Screen {
             let score = if self.partners[m].is_empty() || !x[m][0].is_finite() {
                 0.0
             } else {
-                s.clear();
-                s.extend(self.partners[m].iter().map(|&k| self.pair_excess[k]).filter(|e| !e.is_nan()));
-                if s.is_empty() {
+                // Excesses are +0 or more: with more than half of them 0 (a frame that fits),
+                // the median is 0, found without selecting.
+                let (mut observed, mut zeros) = (0, 0);
+                for &k in &self.partners[m] {
+                    let e = self.pair_excess[k];
+                    observed += usize::from(!e.is_nan());
+                    zeros += usize::from(e == 0.0);
+                }
+                if observed == 0 || zeros > observed / 2 {
                     0.0
                 } else {
+                    s.clear();
+                    s.extend(self.partners[m].iter().map(|&k| self.pair_excess[k]).filter(|e| !e.is_nan()));
                     median(&mut s)
                 }
             };
@@ -315,6 +322,15 @@ impl Screen {
                     self.dist[k] = distance(&work[p.a], &work[p.b]);
                 }
                 fresh = true;
+            }
+            // A marker's step is the second largest change of its pairs: with fewer than two
+            // pairs changed by more than a threshold of 0 or more (a clean frame), none steps.
+            let changed = (0..self.pairs.len())
+                .filter(|&k| (self.dist[k] - self.local[k]).abs() > self.step_threshold)
+                .take(2)
+                .count();
+            if changed < 2 && self.step_threshold >= 0.0 {
+                break;
             }
             let mut pick: Option<(usize, f64)> = None;
             for m in 0..work.len() {
