@@ -23,8 +23,7 @@ use crate::model::MarkerClass;
 use crate::solve::calibrate::{finish, initial_state_weighted, JointProblem, StageCost, Tracker};
 use crate::solve::placement::place_markers;
 use crate::solve::prior::{
-    measure, Anisotropy, Anthropometric, GlobalTerm, LandmarkAnchor, OffsetPrior, PriorReport, ScaleReport,
-    ScaleToward, StaticPosture,
+    measure, Anisotropy, Anthropometric, GlobalTerm, PriorReport, ScaleReport, ScaleToward, StaticPosture,
 };
 use crate::solve::FunctionalHips;
 use crate::solve::{make_qp, Calibration, FrameSolver};
@@ -419,7 +418,7 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
     // level in the poses stage 1 found (docs/CALIBRATION.md, "Feet flat").
     let statics_at: Vec<usize> = (0..kinds.len()).filter(|&i| kinds[i] == Kind::Static).collect();
     let static_poses: Vec<Vec<f64>> = statics_at.iter().map(|&i| state.poses[i].clone()).collect();
-    let feet = feet_level(ctx, &posture, &static_poses);
+    let feet = super::feet_flat::feet_level(ctx, &posture, &static_poses);
     let (flat_ref, flat_w) = match &feet {
         Some((flat, _)) => flat.fold(&coord_ref, &coord_w),
         None => (static_ref.clone(), static_w.clone()),
@@ -466,8 +465,14 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
                 state.offsets[m] = p.zip_map(&generic[m], |v, g| v.clamp(g - b, g + b));
             }
         }
-        let (offset_prior, anchor) =
-            registration_priors(ctx, &classes, &generic, settings.prior_noise_sd_m, slices.len(), &seen);
+        let (offset_prior, anchor) = super::registration::registration_priors(
+            ctx,
+            &classes,
+            &generic,
+            settings.prior_noise_sd_m,
+            slices.len(),
+            &seen,
+        );
         let mut all_terms = terms.clone();
         all_terms.push(&offset_prior);
         all_terms.push(&anchor);
@@ -478,7 +483,7 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
         iterations += out.iterations;
         registered = reg.iter().filter(|r| **r).count();
         if feet.is_some() {
-            place_feet_level(ctx, &classes, &seen, &statics_at, &slices, &mut state);
+            super::feet_flat::place_feet_level(ctx, &classes, &seen, &statics_at, &slices, &mut state);
         }
         offsets = Some(state.offsets.clone());
     } else if placing {
@@ -506,7 +511,7 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
             })
             .collect();
     }
-    cal.registration_report = registration_report(ctx, &cal);
+    cal.registration_report = super::registration::registration_report(ctx, &cal);
     cal.landmark_centres = landmark_centres;
     if settings.functional_hips != FunctionalHips::Off {
         cal.functional_centres =
@@ -584,129 +589,6 @@ fn prior_report(ctx: &Context, pri: &Priors, scale: &[usize], cal: &Calibration)
     }
 }
 
-/// Each registered (or placed) marker's move at the subject's scale, the landmarks beyond
-/// `registration_suspect_mm` (suspect) and beyond half of it (warnings).
-fn registration_report(ctx: &Context, cal: &Calibration) -> crate::solve::prior::RegistrationReport {
-    use crate::solve::prior::{MarkerMove, RegistrationReport};
-    let Some(offsets) = &cal.marker_offsets else { return RegistrationReport::default() };
-    let y = ctx.proxy.state(&cal.proxies);
-    let model = &ctx.model;
-    let classes = crate::model::marker_classes_with_sources(
-        model,
-        &ctx.profile.markers.tracking,
-        &ctx.profile.markers.anatomical,
-    );
-    let mut moves: Vec<MarkerMove> = model
-        .markers
-        .iter()
-        .zip(offsets)
-        .zip(classes)
-        .filter(|((m, o), _)| (*o - m.offset).norm() > 0.0)
-        .map(|((m, o), (class, class_from))| {
-            let s = Vector3::from_fn(|a, _| y[model.scale_index(m.body, a)]);
-            MarkerMove {
-                marker: m.name.clone(),
-                class,
-                class_from,
-                moved_mm: (o - m.offset).component_mul(&s).norm() * 1e3,
-            }
-        })
-        .collect();
-    moves.sort_by(|a, b| b.moved_mm.total_cmp(&a.moved_mm));
-    // Placement moves markers where the setup says (OpenSim's MarkerPlacer): reported, not judged.
-    let judged = ctx.settings.registration && !ctx.settings.marker_placement;
-    let limit = if judged { ctx.settings.registration_suspect_mm } else { f64::INFINITY };
-    let landmarks = moves.iter().filter(|m| m.class == MarkerClass::Anatomical);
-    let far = |k: f64| -> Vec<String> {
-        landmarks
-            .clone()
-            .filter(|m| m.moved_mm > k * limit)
-            .map(|m| format!("landmark {} moved {:.1} mm from the model's position", m.marker, m.moved_mm))
-            .collect()
-    };
-    let suspect = far(1.0);
-    let warnings = far(0.5).into_iter().filter(|w| !suspect.contains(w)).collect();
-    RegistrationReport { moves, warnings, suspect }
-}
-
-/// The registration's priors on the markers' offsets about the model's (`generic`), for `frames`
-/// calibration frames whose marker RMSE is about `noise_m`:
-/// - each landmark (anatomical marker) costs what `prior_fraction · frames` frames with one
-///   marker missed by `noise_m` cost at one standard deviation `registration_anatomical_sd_m`, as
-///   the scale priors do, so that landmarks stay within millimetres however many frames
-///   calibration uses (a prior of one frame's weight washes out: 96 frames moved knee and ASIS
-///   markers by 20–40 mm, bending the joints to buy marker fit);
-/// - each tracking marker (wand, cluster, computed point) is nearly free (one frame at
-///   `registration_tracking_sd_m`);
-/// - on a body whose observed markers are all tracking ones, their common rotation is held as
-///   landmarks' would be ([`LandmarkAnchor`]): nothing else would fix the body's orientation.
-fn registration_priors(
-    ctx: &Context,
-    classes: &[MarkerClass],
-    generic: &[Vector3<f64>],
-    noise_m: f64,
-    frames: usize,
-    seen: &[bool],
-) -> (OffsetPrior, LandmarkAnchor) {
-    let s = &ctx.settings;
-    let noise2 = noise_m.powi(2);
-    let anatomical = s.prior_fraction * frames as f64 * noise2 / s.registration_anatomical_sd_m.powi(2);
-    let tracking = noise2 / s.registration_tracking_sd_m.powi(2);
-    let weight = classes
-        .iter()
-        .map(|c| Vector3::repeat(if *c == MarkerClass::Anatomical { anatomical } else { tracking }))
-        .collect();
-    let model = &ctx.model;
-    let free_body: Vec<bool> = (0..model.bodies.len())
-        .map(|b| {
-            let on: Vec<usize> = (0..model.markers.len()).filter(|&m| seen[m] && model.markers[m].body == b).collect();
-            on.len() >= 2 && on.iter().all(|&m| classes[m] == MarkerClass::Tracking)
-        })
-        .collect();
-    let anchored: Vec<bool> = (0..model.markers.len()).map(|m| seen[m] && free_body[model.markers[m].body]).collect();
-    (OffsetPrior { reference: generic.to_vec(), weight }, LandmarkAnchor::new(model, generic, &anchored, anatomical))
-}
-
-/// Places each foot's landmarks where the static frames `statics_at` see them with the foot
-/// level (the registered poses with the foot's coordinates at the values that level it,
-/// [`super::feet_flat::level_targets`]), as OpenSim's MarkerPlacer places markers on the static
-/// pose and Plug-in Gait's "foot flat" defines the foot: a heel marker put higher on the skin
-/// than the toe marker then lies higher on the model's foot, instead of tilting it.
-fn place_feet_level(
-    ctx: &Context,
-    classes: &[MarkerClass],
-    seen: &[bool],
-    statics_at: &[usize],
-    slices: &[&[f64]],
-    state: &mut crate::solve::calibrate::JointState,
-) {
-    let (model, proxy) = (&ctx.model, &ctx.proxy);
-    let Some(up) = ctx.up else { return };
-    let poses: Vec<Vec<f64>> = statics_at.iter().map(|&i| state.poses[i].clone()).collect();
-    let levels = super::feet_flat::level_targets(model, proxy, &up, &poses);
-    let levelled: Vec<Vec<f64>> = poses
-        .iter()
-        .map(|p| {
-            let mut y = proxy.state(p);
-            for &(j, v) in levels.iter().flat_map(|l| &l.targets) {
-                y[j] = v;
-            }
-            proxy.proxies_from_state(&y, p)
-        })
-        .collect();
-    let frames: Vec<&[f64]> = statics_at.iter().map(|&i| slices[i]).collect();
-    let movable: Vec<bool> = (0..model.markers.len())
-        .map(|m| {
-            seen[m] && classes[m] == MarkerClass::Anatomical && levels.iter().any(|l| l.body == model.markers[m].body)
-        })
-        .collect();
-    for (m, placed) in place_markers(model, proxy, &frames, &levelled, &movable).into_iter().enumerate() {
-        if let Some(p) = placed {
-            state.offsets[m] = p;
-        }
-    }
-}
-
 /// Fails a trial whose marker cloud is far larger or smaller than the model's: the data's
 /// units are then almost certainly not what was read (millimetres read as metres: ×1000).
 fn units_check(
@@ -768,31 +650,6 @@ fn units_check(
             "its markers spread {r:.3e} times as far as the model's: the data look like {hint}; give the right --units"
         ),
     })
-}
-
-/// The static posture with each foot's coordinates pulled toward level in `static_poses`
-/// (`static_feet_flat_sd_deg`), and the levels found; `None` where it does not apply: no static
-/// frames, no feet, no up direction, the setting at 0, or an OpenSim Scale setup's static pose.
-fn feet_level(
-    ctx: &Context,
-    posture: &StaticPosture,
-    static_poses: &[Vec<f64>],
-) -> Option<(StaticPosture, Vec<super::feet_flat::FootLevel>)> {
-    let sd = ctx.settings.static_feet_flat_sd_deg.to_radians();
-    if sd <= 0.0 || static_poses.is_empty() || !ctx.static_posture_values.is_empty() {
-        return None;
-    }
-    let levels = super::feet_flat::level_targets(&ctx.model, &ctx.proxy, &ctx.up?, static_poses);
-    if levels.is_empty() {
-        return None;
-    }
-    let mut flat = posture.clone();
-    let w = (ctx.settings.prior_noise_sd_m / sd).powi(2);
-    for &(j, v) in levels.iter().flat_map(|l| &l.targets) {
-        flat.reference[j] = v;
-        flat.weights[j] = w;
-    }
-    Some((flat, levels))
 }
 
 #[cfg(test)]

@@ -11,10 +11,14 @@
 //! Gait's "foot flat" option: the roll of a foot on two markers is not observed, and the
 //! subtalar axis, being oblique, would turn the foot's heading with it.
 
+use super::Context;
 use crate::kinematics::cpu::{forward, Workspace};
 use crate::model::proxy::ProxyMap;
 use crate::model::roles::RoleTable;
-use crate::model::{CoordinateKind, Model};
+use crate::model::{CoordinateKind, MarkerClass, Model};
+use crate::solve::calibrate::JointState;
+use crate::solve::placement::place_markers;
+use crate::solve::prior::StaticPosture;
 use nalgebra::Vector3;
 
 /// Newton iterations per static frame (the feet start within degrees of level).
@@ -140,6 +144,71 @@ pub fn level_targets(model: &Model, proxy: &ProxyMap, up: &Vector3<f64>, poses: 
         level.targets.iter_mut().for_each(|t| t.1 /= n);
     }
     out
+}
+
+/// The static posture with each foot's coordinates pulled toward level in `static_poses`
+/// (`static_feet_flat_sd_deg`), and the levels found; `None` where it does not apply: no static
+/// frames, no feet, no up direction, the setting at 0, or an OpenSim Scale setup's static pose.
+pub fn feet_level(
+    ctx: &Context,
+    posture: &StaticPosture,
+    static_poses: &[Vec<f64>],
+) -> Option<(StaticPosture, Vec<FootLevel>)> {
+    let sd = ctx.settings.static_feet_flat_sd_deg.to_radians();
+    if sd <= 0.0 || static_poses.is_empty() || !ctx.static_posture_values.is_empty() {
+        return None;
+    }
+    let levels = level_targets(&ctx.model, &ctx.proxy, &ctx.up?, static_poses);
+    if levels.is_empty() {
+        return None;
+    }
+    let mut flat = posture.clone();
+    let w = (ctx.settings.prior_noise_sd_m / sd).powi(2);
+    for &(j, v) in levels.iter().flat_map(|l| &l.targets) {
+        flat.reference[j] = v;
+        flat.weights[j] = w;
+    }
+    Some((flat, levels))
+}
+
+/// Places each foot's landmarks where the static frames `statics_at` see them with the foot
+/// level (the registered poses with the foot's coordinates at the values that level it,
+/// [`level_targets`]), as OpenSim's MarkerPlacer places markers on the static
+/// pose and Plug-in Gait's "foot flat" defines the foot: a heel marker put higher on the skin
+/// than the toe marker then lies higher on the model's foot, instead of tilting it.
+pub fn place_feet_level(
+    ctx: &Context,
+    classes: &[MarkerClass],
+    seen: &[bool],
+    statics_at: &[usize],
+    slices: &[&[f64]],
+    state: &mut JointState,
+) {
+    let (model, proxy) = (&ctx.model, &ctx.proxy);
+    let Some(up) = ctx.up else { return };
+    let poses: Vec<Vec<f64>> = statics_at.iter().map(|&i| state.poses[i].clone()).collect();
+    let levels = level_targets(model, proxy, &up, &poses);
+    let levelled: Vec<Vec<f64>> = poses
+        .iter()
+        .map(|p| {
+            let mut y = proxy.state(p);
+            for &(j, v) in levels.iter().flat_map(|l| &l.targets) {
+                y[j] = v;
+            }
+            proxy.proxies_from_state(&y, p)
+        })
+        .collect();
+    let frames: Vec<&[f64]> = statics_at.iter().map(|&i| slices[i]).collect();
+    let movable: Vec<bool> = (0..model.markers.len())
+        .map(|m| {
+            seen[m] && classes[m] == MarkerClass::Anatomical && levels.iter().any(|l| l.body == model.markers[m].body)
+        })
+        .collect();
+    for (m, placed) in place_markers(model, proxy, &frames, &levelled, &movable).into_iter().enumerate() {
+        if let Some(p) = placed {
+            state.offsets[m] = p;
+        }
+    }
 }
 
 #[cfg(test)]

@@ -20,6 +20,7 @@ pub mod marker_errors;
 pub mod matching;
 pub mod order;
 pub mod plausibility;
+pub mod registration;
 pub mod report;
 pub mod session;
 pub mod stats;
