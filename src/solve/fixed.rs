@@ -116,8 +116,40 @@ pub fn add_t_mul_sym(out: &mut DMatrix<f64>, o: usize, alpha: f64, a: &DMatrix<f
 /// four, the lower triangle mirrored from the upper. The calibration's reduced system
 /// (`solve::calibrate`) spends most of its time here: 3–4× faster than [`add_t_mul_sym`].
 pub fn add_t_mul_sym_tiled(out: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>) {
+    let n = a.nrows();
+    t_mul_sym_tiles(out, alpha, a, |_, _| Some(0..n), |_, _| 0..n);
+}
+
+/// The set bits of a mask, lowest first.
+#[derive(Clone, Copy)]
+struct Bits(u64);
+
+impl Iterator for Bits {
+    type Item = usize;
+    #[inline(always)]
+    fn next(&mut self) -> Option<usize> {
+        (self.0 != 0).then(|| {
+            let k = self.0.trailing_zeros() as usize;
+            self.0 &= self.0 - 1;
+            k
+        })
+    }
+}
+
+/// `out += α aᵀ a`, the upper triangle in 4 × 4 tiles of outputs mirrored to the lower: each
+/// output one sum over the rows `k` in increasing order, those that `tile_rows(i0, j0)` gives
+/// for a whole tile (`None`: the tile adds nothing) and `pair_rows(i, j)` for one output of a
+/// tile at the matrix's edge.
+#[inline(always)]
+fn t_mul_sym_tiles<R: Iterator<Item = usize>>(
+    out: &mut DMatrix<f64>,
+    alpha: f64,
+    a: &DMatrix<f64>,
+    tile_rows: impl Fn(usize, usize) -> Option<R>,
+    pair_rows: impl Fn(usize, usize) -> R,
+) {
     let (n, m) = (a.nrows(), a.ncols());
-    assert_eq!((out.nrows(), out.ncols()), (m, m), "add_t_mul_sym_tiled: out is not {m}×{m}");
+    assert_eq!((out.nrows(), out.ncols()), (m, m), "add_t_mul_sym: out is not {m}×{m}");
     let data = a.as_slice();
     let c = |j: usize| &data[j * n..(j + 1) * n];
     let mut tile = [[0.0f64; 4]; 4];
@@ -127,11 +159,15 @@ pub fn add_t_mul_sym_tiled(out: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>)
         let mut i0 = 0;
         while i0 <= j0 {
             let iw = (m - i0).min(4);
+            let Some(rows) = tile_rows(i0, j0) else {
+                i0 += 4;
+                continue;
+            };
             if iw == 4 && jw == 4 {
                 let (a0, a1, a2, a3) = (c(i0), c(i0 + 1), c(i0 + 2), c(i0 + 3));
                 let (b0, b1, b2, b3) = (c(j0), c(j0 + 1), c(j0 + 2), c(j0 + 3));
                 let mut s = [[0.0f64; 4]; 4];
-                for k in 0..n {
+                for k in rows {
                     let (x0, x1, x2, x3) = (a0[k], a1[k], a2[k], a3[k]);
                     let (y0, y1, y2, y3) = (b0[k], b1[k], b2[k], b3[k]);
                     s[0][0] += x0 * y0;
@@ -157,7 +193,7 @@ pub fn add_t_mul_sym_tiled(out: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>)
                     for (dj, v) in row.iter_mut().enumerate().take(jw) {
                         let (x, y) = (c(i0 + di), c(j0 + dj));
                         let mut s = 0.0;
-                        for k in 0..n {
+                        for k in pair_rows(i0 + di, j0 + dj) {
                             s += x[k] * y[k];
                         }
                         *v = s;
@@ -195,12 +231,10 @@ pub fn add_t_mul_sym_sparse(out: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>
     if n > 64 || a.iter().any(|v| !v.is_finite()) {
         return add_t_mul_sym_tiled(out, alpha, a);
     }
-    assert_eq!((out.nrows(), out.ncols()), (m, m), "add_t_mul_sym_sparse: out is not {m}×{m}");
     let data = a.as_slice();
-    let c = |j: usize| &data[j * n..(j + 1) * n];
     let mask = |j: usize| -> u64 {
         let mut bits = 0u64;
-        for (k, v) in c(j).iter().enumerate() {
+        for (k, v) in data[j * n..(j + 1) * n].iter().enumerate() {
             if *v != 0.0 {
                 bits |= 1 << k;
             }
@@ -209,76 +243,13 @@ pub fn add_t_mul_sym_sparse(out: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>
     };
     let masks: Vec<u64> = (0..m).map(mask).collect();
     let tiles: Vec<u64> = masks.chunks(4).map(|t| t.iter().fold(0, |a, b| a | b)).collect();
-    let mut tile = [[0.0f64; 4]; 4];
-    let mut j0 = 0;
-    while j0 < m {
-        let jw = (m - j0).min(4);
-        let mut i0 = 0;
-        while i0 <= j0 {
-            let iw = (m - i0).min(4);
-            let rows = tiles[i0 / 4] & tiles[j0 / 4];
-            if rows == 0 {
-                i0 += 4;
-                continue;
-            }
-            if iw == 4 && jw == 4 {
-                let (a0, a1, a2, a3) = (c(i0), c(i0 + 1), c(i0 + 2), c(i0 + 3));
-                let (b0, b1, b2, b3) = (c(j0), c(j0 + 1), c(j0 + 2), c(j0 + 3));
-                let mut s = [[0.0f64; 4]; 4];
-                let mut bits = rows;
-                while bits != 0 {
-                    let k = bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    let (x0, x1, x2, x3) = (a0[k], a1[k], a2[k], a3[k]);
-                    let (y0, y1, y2, y3) = (b0[k], b1[k], b2[k], b3[k]);
-                    s[0][0] += x0 * y0;
-                    s[0][1] += x0 * y1;
-                    s[0][2] += x0 * y2;
-                    s[0][3] += x0 * y3;
-                    s[1][0] += x1 * y0;
-                    s[1][1] += x1 * y1;
-                    s[1][2] += x1 * y2;
-                    s[1][3] += x1 * y3;
-                    s[2][0] += x2 * y0;
-                    s[2][1] += x2 * y1;
-                    s[2][2] += x2 * y2;
-                    s[2][3] += x2 * y3;
-                    s[3][0] += x3 * y0;
-                    s[3][1] += x3 * y1;
-                    s[3][2] += x3 * y2;
-                    s[3][3] += x3 * y3;
-                }
-                tile = s;
-            } else {
-                for (di, row) in tile.iter_mut().enumerate().take(iw) {
-                    for (dj, v) in row.iter_mut().enumerate().take(jw) {
-                        let (x, y) = (c(i0 + di), c(j0 + dj));
-                        let mut s = 0.0;
-                        let mut bits = masks[i0 + di] & masks[j0 + dj];
-                        while bits != 0 {
-                            let k = bits.trailing_zeros() as usize;
-                            bits &= bits - 1;
-                            s += x[k] * y[k];
-                        }
-                        *v = s;
-                    }
-                }
-            }
-            for (di, row) in tile.iter().enumerate().take(iw) {
-                for (dj, v) in row.iter().enumerate().take(jw) {
-                    let (i, j) = (i0 + di, j0 + dj);
-                    if i < j {
-                        out[(i, j)] += alpha * v;
-                        out[(j, i)] += alpha * v;
-                    } else if i == j {
-                        out[(i, j)] += alpha * v;
-                    }
-                }
-            }
-            i0 += 4;
-        }
-        j0 += 4;
-    }
+    t_mul_sym_tiles(
+        out,
+        alpha,
+        a,
+        |i0, j0| Some(Bits(tiles[i0 / 4] & tiles[j0 / 4])).filter(|b| b.0 != 0),
+        |i, j| Bits(masks[i] & masks[j]),
+    );
 }
 
 /// `b ← L⁻¹ b` for lower-triangular `l` (square, `b.nrows()` rows), column by column as
