@@ -60,7 +60,7 @@ pub fn feet(model: &Model, proxy: &ProxyMap, up: &Vector3<f64>) -> Vec<Foot> {
     let y0 = model.default_state();
     forward(model, &y0, &mut ws);
     let mut out = Vec::new();
-    for (b, _) in model.bodies.iter().enumerate() {
+    for b in 0..model.bodies.len() {
         let heel = model.markers.iter().find(|m| m.body == b && role(m, "calcaneus"));
         let toe = model.markers.iter().find(|m| m.body == b && role(m, "metatarsal head or toe"));
         let (Some(heel), Some(toe)) = (heel, toe) else { continue };
@@ -224,7 +224,7 @@ mod tests {
         let feet = feet(m, proxy, &up);
         assert_eq!(feet.len(), 2, "{feet:?}");
         assert!(feet.iter().all(|f| m.coordinates[f.coordinate].name.starts_with("ankle_angle")), "{feet:?}");
-        // A pose with the shanks leaning forward (knees and ankles flexed) and the feet rolled.
+        // The right thigh 4° forward and its knee bent 8°: the shank leans 4° back; the ankle at 3°.
         let mut y = m.default_state();
         for (name, deg) in [("knee_angle_r", 8.0), ("ankle_angle_r", 3.0), ("hip_flexion_r", 4.0)] {
             y[m.coordinate_index(name).expect(name)] = f64::to_radians(deg);
@@ -232,8 +232,7 @@ mod tests {
         let p = proxy.proxies_from_state(&y, &proxy.default_proxies());
         let levels = level_targets(m, proxy, &up, &[p]);
         let right = levels.iter().find(|l| m.bodies[l.body].name == "calcn_r").expect("right foot");
-        // Thigh 4° forward, shank 4° back from it: the shank leans 4° back, the foot pitches
-        // by that less the ankle's 3°.
+        // The foot pitches by the shank's lean less the ankle's 3°.
         assert!((right.tilt_deg.abs() - 1.0).abs() < 0.2, "{right:?}");
         // Levelled: the ankle takes up the shank's lean.
         let mut yl = y.clone();
