@@ -420,7 +420,7 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
     let static_poses: Vec<Vec<f64>> = statics_at.iter().map(|&i| state.poses[i].clone()).collect();
     let feet = super::feet_flat::feet_level(ctx, &posture, &static_poses);
     let (flat_ref, flat_w) = match &feet {
-        Some((flat, _)) => flat.fold(&coord_ref, &coord_w),
+        Some(f) => f.posture.fold(&coord_ref, &coord_w),
         None => (static_ref.clone(), static_w.clone()),
     };
     let refs: Vec<&[f64]> =
@@ -482,8 +482,8 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
         stages.push(StageCost::new("registration", slices.len(), out.iterations, out.rejected, t));
         iterations += out.iterations;
         registered = reg.iter().filter(|r| **r).count();
-        if feet.is_some() {
-            super::feet_flat::place_feet_level(ctx, &classes, &seen, &statics_at, &slices, &mut state);
+        if let Some(f) = &feet {
+            super::feet_flat::place_feet_level(ctx, f, &classes, &seen, &statics_at, &slices, &mut state);
         }
         offsets = Some(state.offsets.clone());
     } else if placing {
@@ -497,8 +497,9 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
     let mut cal = finish(state, out, &p0, &ctx.proxy, offsets, registered, started);
     cal.static_frames = kinds.iter().filter(|k| **k == Kind::Static).count();
     cal.posture = super::plausibility::static_posture(ctx, &cal.frame_proxies[..cal.static_frames]);
-    if let Some((_, levels)) = &feet {
-        cal.posture.feet = levels
+    if let Some(f) = &feet {
+        cal.posture.feet = f
+            .levels
             .iter()
             .map(|l| crate::solve::prior::FootLevelReport {
                 body: ctx.model.bodies[l.body].name.clone(),
@@ -512,6 +513,9 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
             .collect();
     }
     cal.registration_report = super::registration::registration_report(ctx, &cal);
+    if let Some(f) = &feet {
+        cal.registration_report.warnings.extend(f.warnings.iter().cloned());
+    }
     cal.landmark_centres = landmark_centres;
     if settings.functional_hips != FunctionalHips::Off {
         cal.functional_centres =

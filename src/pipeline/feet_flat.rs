@@ -25,6 +25,11 @@ use nalgebra::Vector3;
 const ITERATIONS: usize = 6;
 /// Finite-difference step of the pitch's derivative (rad).
 const STEP_RAD: f64 = 1e-6;
+/// A static foot pitched further than this from level in the first stage's poses (deg) is not
+/// levelled, and a warning says so: a subject standing on heels or toes (an equinus foot), not
+/// markers put at different heights (which tilt a foot by a few degrees: 1.5–3° on the Plug-in
+/// Gait flatfoot subject).
+pub const MAX_TILT_DEG: f64 = 10.0;
 
 /// One foot of a model: the body carrying its heel marker, its heel-to-toe direction in its own
 /// frame (horizontal at the neutral pose), and the coordinate that pitches it.
@@ -146,29 +151,48 @@ pub fn level_targets(model: &Model, proxy: &ProxyMap, up: &Vector3<f64>, poses: 
     out
 }
 
+/// The feet of a static trial levelled ([`feet_level`]).
+#[derive(Clone, Debug)]
+pub struct FeetFlat {
+    /// The static posture with the levelled feet's coordinates pulled toward level.
+    pub posture: StaticPosture,
+    /// The feet levelled.
+    pub levels: Vec<FootLevel>,
+    /// Why a foot was not (pitched beyond [`MAX_TILT_DEG`]).
+    pub warnings: Vec<String>,
+}
+
 /// The static posture with each foot's coordinates pulled toward level in `static_poses`
-/// (`static_feet_flat_sd_deg`), and the levels found; `None` where it does not apply: no static
-/// frames, no feet, no up direction, the setting at 0, or an OpenSim Scale setup's static pose.
-pub fn feet_level(
-    ctx: &Context,
-    posture: &StaticPosture,
-    static_poses: &[Vec<f64>],
-) -> Option<(StaticPosture, Vec<FootLevel>)> {
+/// (`static_feet_flat_sd_deg`), the feet pitched less than [`MAX_TILT_DEG`] only; `None` where it
+/// does not apply: no static frames, no feet, no up direction, the setting at 0, or an OpenSim
+/// Scale setup's static pose.
+pub fn feet_level(ctx: &Context, posture: &StaticPosture, static_poses: &[Vec<f64>]) -> Option<FeetFlat> {
     let sd = ctx.settings.static_feet_flat_sd_deg.to_radians();
     if sd <= 0.0 || static_poses.is_empty() || !ctx.static_posture_values.is_empty() {
         return None;
     }
-    let levels = level_targets(&ctx.model, &ctx.proxy, &ctx.up?, static_poses);
-    if levels.is_empty() {
+    let found = level_targets(&ctx.model, &ctx.proxy, &ctx.up?, static_poses);
+    if found.is_empty() {
         return None;
     }
+    let (levels, steep): (Vec<FootLevel>, Vec<FootLevel>) =
+        found.into_iter().partition(|l| l.tilt_deg.abs() <= MAX_TILT_DEG);
+    let warnings = steep
+        .iter()
+        .map(|l| {
+            format!(
+                "static trial: {} is pitched {:+.1}° from level (beyond {MAX_TILT_DEG}°): not levelled (standing on heels or toes? static_feet_flat_sd_deg = 0 leaves every foot as the markers say)",
+                ctx.model.bodies[l.body].name, l.tilt_deg
+            )
+        })
+        .collect();
     let mut flat = posture.clone();
     let w = (ctx.settings.prior_noise_sd_m / sd).powi(2);
     for &(j, v) in levels.iter().flat_map(|l| &l.targets) {
         flat.reference[j] = v;
         flat.weights[j] = w;
     }
-    Some((flat, levels))
+    Some(FeetFlat { posture: flat, levels, warnings })
 }
 
 /// Places each foot's landmarks where the static frames `statics_at` see them with the foot
@@ -176,8 +200,10 @@ pub fn feet_level(
 /// [`level_targets`]), as OpenSim's MarkerPlacer places markers on the static
 /// pose and Plug-in Gait's "foot flat" defines the foot: a heel marker put higher on the skin
 /// than the toe marker then lies higher on the model's foot, instead of tilting it.
+/// Only the feet of `feet` (those [`feet_level`] levelled) are placed.
 pub fn place_feet_level(
     ctx: &Context,
+    feet: &FeetFlat,
     classes: &[MarkerClass],
     seen: &[bool],
     statics_at: &[usize],
@@ -187,7 +213,8 @@ pub fn place_feet_level(
     let (model, proxy) = (&ctx.model, &ctx.proxy);
     let Some(up) = ctx.up else { return };
     let poses: Vec<Vec<f64>> = statics_at.iter().map(|&i| state.poses[i].clone()).collect();
-    let levels = level_targets(model, proxy, &up, &poses);
+    let mut levels = level_targets(model, proxy, &up, &poses);
+    levels.retain(|l| feet.levels.iter().any(|k| k.body == l.body));
     let levelled: Vec<Vec<f64>> = poses
         .iter()
         .map(|p| {
@@ -245,5 +272,22 @@ mod tests {
         let pitch = (ws.body_rot[right.body] * foot.forward).dot(&up).asin().to_degrees();
         assert!(pitch.abs() < 0.01, "still pitched {pitch}°: {right:?}");
         assert!((right.targets[0].1.to_degrees() - 4.0).abs() < 0.2, "{right:?}");
+    }
+
+    #[test]
+    fn a_foot_on_its_toes_is_not_levelled_and_says_so() {
+        let ctx = Context::shipped().expect("shipped");
+        let (m, proxy) = (&ctx.model, &ctx.proxy);
+        let mut y = m.default_state();
+        y[m.coordinate_index("ankle_angle_r").expect("ankle")] = f64::to_radians(-20.0);
+        y[m.coordinate_index("ankle_angle_l").expect("ankle")] = f64::to_radians(4.0);
+        let p = proxy.proxies_from_state(&y, &proxy.default_proxies());
+        let posture = StaticPosture::neutral(m, 5f64.to_radians(), 0.01, &[]);
+        let flat = feet_level(&ctx, &posture, &[p]).expect("feet");
+        let names: Vec<&str> = flat.levels.iter().map(|l| m.bodies[l.body].name.as_str()).collect();
+        assert_eq!(names, ["calcn_l"], "{flat:?}");
+        assert!(flat.warnings.len() == 1 && flat.warnings[0].contains("calcn_r"), "{:?}", flat.warnings);
+        let j = m.coordinate_index("ankle_angle_r").expect("ankle");
+        assert_eq!(flat.posture.reference[j], posture.reference[j]);
     }
 }
