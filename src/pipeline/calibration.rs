@@ -497,23 +497,9 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
     let mut cal = finish(state, out, &p0, &ctx.proxy, offsets, registered, started);
     cal.static_frames = kinds.iter().filter(|k| **k == Kind::Static).count();
     cal.posture = super::plausibility::static_posture(ctx, &cal.frame_proxies[..cal.static_frames]);
-    if let Some(f) = &feet {
-        cal.posture.feet = f
-            .levels
-            .iter()
-            .map(|l| crate::solve::prior::FootLevelReport {
-                body: ctx.model.bodies[l.body].name.clone(),
-                tilt_deg: l.tilt_deg,
-                targets: l
-                    .targets
-                    .iter()
-                    .map(|&(j, v)| (ctx.model.coordinates[j].name.clone(), v.to_degrees()))
-                    .collect(),
-            })
-            .collect();
-    }
     cal.registration_report = super::registration::registration_report(ctx, &cal);
     if let Some(f) = &feet {
+        cal.posture.feet = f.report(&ctx.model);
         cal.registration_report.warnings.extend(f.warnings.iter().cloned());
     }
     cal.landmark_centres = landmark_centres;

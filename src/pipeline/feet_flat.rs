@@ -18,7 +18,7 @@ use crate::model::roles::RoleTable;
 use crate::model::{CoordinateKind, MarkerClass, Model};
 use crate::solve::calibrate::JointState;
 use crate::solve::placement::place_markers;
-use crate::solve::prior::StaticPosture;
+use crate::solve::prior::{FootLevelReport, StaticPosture};
 use nalgebra::Vector3;
 
 /// Newton iterations per static frame (the feet start within degrees of level).
@@ -160,6 +160,20 @@ pub struct FeetFlat {
     pub levels: Vec<FootLevel>,
     /// Why a foot was not (pitched beyond [`MAX_TILT_DEG`]).
     pub warnings: Vec<String>,
+}
+
+impl FeetFlat {
+    /// The levelled feet as the calibration report gives them (names, degrees).
+    pub fn report(&self, model: &Model) -> Vec<FootLevelReport> {
+        self.levels
+            .iter()
+            .map(|l| FootLevelReport {
+                body: model.bodies[l.body].name.clone(),
+                tilt_deg: l.tilt_deg,
+                targets: l.targets.iter().map(|&(j, v)| (model.coordinates[j].name.clone(), v.to_degrees())).collect(),
+            })
+            .collect()
+    }
 }
 
 /// The static posture with each foot's coordinates pulled toward level in `static_poses`
