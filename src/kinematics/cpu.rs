@@ -70,46 +70,72 @@ fn scale_of(y: &[f64], model: &Model, body: Option<usize>) -> Vector3<f64> {
 
 /// Forward kinematics of every body and marker at state `y = [q; s]`.
 pub fn forward(model: &Model, y: &[f64], ws: &mut Workspace) {
-    for (b, body) in model.bodies.iter().enumerate() {
-        let (r_p, t_p) = match body.parent {
-            Some(p) => (ws.body_rot[p], ws.body_pos[p]),
-            None => (Matrix3::identity(), Vector3::zeros()),
-        };
-        let s_p = scale_of(y, model, body.parent);
-        let po = &body.joint.parent_offset;
-        let mut r = r_p * po.rotation.to_rotation_matrix().matrix();
-        let mut t = t_p + r_p * s_p.component_mul(&po.translation.vector);
-        for k in body.joint.motions.clone() {
-            let mo = &model.motions[k];
-            let x = mo.coordinate.map_or(0.0, |c| y[c]);
-            let (val, der) = mo.func.eval(x);
-            let axis_w = r * mo.axis;
-            ws.motion_axis[k] = axis_w;
-            ws.motion_origin[k] = t;
-            ws.motion_val[k] = val;
-            ws.motion_der[k] = der;
-            match mo.kind {
-                MotionKind::Rotation => {
-                    r *= Rotation3::from_axis_angle(&Unit::new_unchecked(mo.axis), val).matrix();
-                }
-                MotionKind::Translation => {
-                    let sigma = mo.parent_scale_weights.map_or(1.0, |w| w.dot(&s_p));
-                    ws.motion_sigma[k] = sigma;
-                    t += axis_w * (val * sigma);
-                }
+    for b in 0..model.nb() {
+        forward_body(model, y, ws, b);
+    }
+    for m in 0..model.markers.len() {
+        forward_marker(model, y, ws, m);
+    }
+}
+
+/// [`forward`] of `bodies` and `markers` only, the rest of `ws` left as it is: `bodies` in
+/// ascending order, each one's parent either listed before it or already at `y` in `ws`, and
+/// `markers` on bodies at `y`. What it computes is bit for bit what [`forward`] gives.
+pub fn forward_part(model: &Model, y: &[f64], ws: &mut Workspace, bodies: &[usize], markers: &[usize]) {
+    for &b in bodies {
+        forward_body(model, y, ws, b);
+    }
+    for &m in markers {
+        forward_marker(model, y, ws, m);
+    }
+}
+
+/// Body `b`'s frame and its joint's motions, from its parent's frame in `ws`.
+#[inline]
+fn forward_body(model: &Model, y: &[f64], ws: &mut Workspace, b: usize) {
+    let body = &model.bodies[b];
+    let (r_p, t_p) = match body.parent {
+        Some(p) => (ws.body_rot[p], ws.body_pos[p]),
+        None => (Matrix3::identity(), Vector3::zeros()),
+    };
+    let s_p = scale_of(y, model, body.parent);
+    let po = &body.joint.parent_offset;
+    let mut r = r_p * po.rotation.to_rotation_matrix().matrix();
+    let mut t = t_p + r_p * s_p.component_mul(&po.translation.vector);
+    for k in body.joint.motions.clone() {
+        let mo = &model.motions[k];
+        let x = mo.coordinate.map_or(0.0, |c| y[c]);
+        let (val, der) = mo.func.eval(x);
+        let axis_w = r * mo.axis;
+        ws.motion_axis[k] = axis_w;
+        ws.motion_origin[k] = t;
+        ws.motion_val[k] = val;
+        ws.motion_der[k] = der;
+        match mo.kind {
+            MotionKind::Rotation => {
+                r *= Rotation3::from_axis_angle(&Unit::new_unchecked(mo.axis), val).matrix();
+            }
+            MotionKind::Translation => {
+                let sigma = mo.parent_scale_weights.map_or(1.0, |w| w.dot(&s_p));
+                ws.motion_sigma[k] = sigma;
+                t += axis_w * (val * sigma);
             }
         }
-        let s_b = scale_of(y, model, Some(b));
-        let co = &body.joint.child_offset;
-        let r_b = r * co.rotation.to_rotation_matrix().matrix().transpose();
-        ws.body_pos[b] = t - r_b * s_b.component_mul(&co.translation.vector);
-        ws.body_rot[b] = r_b;
     }
-    for (m, mk) in model.markers.iter().enumerate() {
-        let s_b = scale_of(y, model, Some(mk.body));
-        let x = ws.body_pos[mk.body] + ws.body_rot[mk.body] * s_b.component_mul(&mk.offset);
-        ws.markers[3 * m..3 * m + 3].copy_from_slice(x.as_slice());
-    }
+    let s_b = scale_of(y, model, Some(b));
+    let co = &body.joint.child_offset;
+    let r_b = r * co.rotation.to_rotation_matrix().matrix().transpose();
+    ws.body_pos[b] = t - r_b * s_b.component_mul(&co.translation.vector);
+    ws.body_rot[b] = r_b;
+}
+
+/// Marker `m`'s world position, from its body's frame in `ws`.
+#[inline]
+fn forward_marker(model: &Model, y: &[f64], ws: &mut Workspace, m: usize) {
+    let mk = &model.markers[m];
+    let s_b = scale_of(y, model, Some(mk.body));
+    let x = ws.body_pos[mk.body] + ws.body_rot[mk.body] * s_b.component_mul(&mk.offset);
+    ws.markers[3 * m..3 * m + 3].copy_from_slice(x.as_slice());
 }
 
 /// Calls `f(j, a, w)` for every contribution `∂x/∂y_j += a + w × x` of the joints on the chain

@@ -18,7 +18,7 @@ use super::continuity::{max_jump, FLIP_RAD};
 use crate::io::MarkerTrial;
 use crate::kinematics::assembly::{fold_tracking_reference, Evaluator, FrameProblem};
 use crate::kinematics::backend::{BackendError, BatchBackend, EnergyEval, GnSink, GnView};
-use crate::solve::init::multi_start;
+use crate::solve::init::multi_start_with;
 use crate::solve::presolve::outlier_threshold;
 use crate::solve::trqp::{FrameIteration, Next};
 use crate::solve::{make_qp, FrameSolver, FrameStats, FrameStatus, Presolve, Presolver, SolverSettings, WarmStart};
@@ -92,6 +92,8 @@ struct Lane<'e> {
     /// The current frame's observations.
     obs: Vec<f64>,
     presolver: Presolver,
+    /// The cold start's sweeps ([`Presolver::cold`]).
+    cold: Presolver,
 }
 
 impl<'e> Lane<'e> {
@@ -114,6 +116,7 @@ impl<'e> Lane<'e> {
             dphi: vec![0.0; eval.proxy.terms.len()],
             obs: vec![f64::NAN; 3 * eval.model.markers.len()],
             presolver: Presolver::new(eval, settings, false),
+            cold: Presolver::cold(eval, settings),
         }
     }
 
@@ -128,7 +131,7 @@ impl<'e> Lane<'e> {
 
     /// Prepares `self.frame`: warm start, pose prior, cold start at a segment's beginning, and
     /// with `presolve` the pre-solve of a warm-started frame (a cold start already places the root
-    /// and sweeps, [`multi_start`]). The pose prior stays at the warm start.
+    /// and sweeps, [`multi_start_with`]). The pose prior stays at the warm start.
     fn start_frame(&mut self, inp: &TrialInputs<'_>, presolve: bool) {
         let eval = self.solver.eval;
         let nq = eval.model.nq();
@@ -163,7 +166,7 @@ impl<'e> Lane<'e> {
             };
             // A segment's first frame: several starts, the best kept; the iteration below then
             // only confirms it.
-            multi_start(&mut self.solver, &frame, &mut self.p, inp.calibrated);
+            multi_start_with(&mut self.cold, &mut self.solver, &frame, &mut self.p, inp.calibrated);
         } else if presolve {
             let frame = FrameProblem {
                 observed: &self.obs,
@@ -290,7 +293,7 @@ pub fn run_lanes_across<E: From<BackendError>>(
 /// ([`outlier_threshold`]) are solved again from their warm start (the previous solved frame of
 /// their segment, as updated by this pass) with pre-solve, and the result with the lower energy
 /// is kept; the time spent is added to the frame's. Segments' first frames (cold-started from
-/// several starts, [`multi_start`]) and bridged frames are left. Frames are visited in order on
+/// several starts, [`multi_start_with`]) and bridged frames are left. Frames are visited in order on
 /// the CPU, so the result does not depend on the lane count or backend. Returns the frames
 /// whose re-solved result was kept.
 pub fn resolve_outliers(

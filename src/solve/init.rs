@@ -2,8 +2,10 @@
 //! fit of the default-pose model markers to the observed ones, then fit the root coordinates to
 //! that placement from several headings and keep the best.
 
+use super::presolve::Presolver;
 use super::trqp::FrameSolver;
 use crate::kinematics::assembly::FrameProblem;
+use crate::model::proxy::ProxyKind;
 use nalgebra::{Matrix3, Vector3, SVD};
 
 /// Proxies driving the coordinates of root joints (bodies hanging from ground).
@@ -44,17 +46,43 @@ pub fn kabsch(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> Option<(Matrix3<f64>, V
 
 /// Initial proxies for `frame`, starting from `p` (whose scale part is kept): the root is
 /// placed rigidly on the observed markers ([`place_root`]), then root-to-leaf sweeps fit each
-/// joint to the markers of its subtree ([`sweep`]).
+/// joint to the markers of its subtree ([`Presolver::cold`]). Builds its scratch: callers that
+/// start many frames keep one and call [`cold_start_with`].
 pub fn cold_start(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mut [f64]) {
+    let mut cold = Presolver::cold(solver.eval, &solver.settings);
+    cold_start_with(&mut cold, solver, frame, p);
+}
+
+/// [`cold_start`] with the sweeps' scratch `cold` ([`Presolver::cold`] of the solver's evaluator).
+pub fn cold_start_with(cold: &mut Presolver, solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mut [f64]) {
     place_root(solver, frame, p);
-    for _ in 0..2 {
-        sweep(solver, frame, p);
+    sweeps(cold, solver, frame, p);
+}
+
+/// The cold start's sweeps from `p` (root placed): local fits of each joint's proxies to its
+/// markers ([`Presolver::cold`]), on the joint's columns only. A profile whose linear constraints
+/// bind pose proxies keeps the constrained frame solver for them ([`sweep`], twice): the local fits
+/// know only the proxy ranges.
+fn sweeps(cold: &mut Presolver, solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mut [f64]) {
+    let proxy = solver.eval.proxy;
+    let pose_constrained = proxy
+        .constraints
+        .iter()
+        .any(|c| c.coefficients.iter().any(|&(k, _)| proxy.proxies[k].kind != ProxyKind::Scale));
+    if pose_constrained {
+        for _ in 0..2 {
+            sweep(solver, frame, p);
+        }
+    } else {
+        cold.sweep(solver.eval, frame, p);
     }
 }
 
-/// One root-to-leaf Gauss–Seidel sweep of local fits (METHOD.md's pre-solve): for each joint in
-/// topological order, its pose proxies are fitted to the markers of its subtree, everything
-/// else held. Proxies driving several joints (a coupled spine) are fitted at their first joint.
+/// One root-to-leaf Gauss–Seidel sweep of local fits (METHOD.md's pre-solve) with the frame
+/// solver (its constraints held): for each joint in topological order, its pose proxies are
+/// fitted to the markers of its subtree, everything else held. Proxies driving several joints (a
+/// coupled spine) are fitted at their first joint. Each fit evaluates the whole model: the cold
+/// start uses it only under pose constraints ([`Presolver::cold`] otherwise).
 pub fn sweep(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mut [f64]) {
     let eval = solver.eval;
     let model = eval.model;
@@ -111,21 +139,40 @@ pub fn sweep(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mut [f6
 /// the neutral pose with root placement and sweeps ([`cold_start`]), the neutral pose with the
 /// root placed only, and the calibration pose with the root placed. Distal chains with few markers
 /// (forearm pronation against humeral rotation) have local minima that a single start can land in,
-/// and a walk tracked from a wrong first frame stays in the wrong basin.
+/// and a walk tracked from a wrong first frame stays in the wrong basin. Builds the sweeps'
+/// scratch: see [`multi_start_with`].
 pub fn multi_start(
     solver: &mut FrameSolver<'_>,
     frame: &FrameProblem<'_>,
     p: &mut [f64],
     calibrated: &[f64],
 ) -> super::FrameStats {
+    let mut cold = Presolver::cold(solver.eval, &solver.settings);
+    multi_start_with(&mut cold, solver, frame, p, calibrated)
+}
+
+/// [`multi_start`] with the sweeps' scratch `cold` ([`Presolver::cold`] of the solver's
+/// evaluator). The first two starts share one root placement.
+pub fn multi_start_with(
+    cold: &mut Presolver,
+    solver: &mut FrameSolver<'_>,
+    frame: &FrameProblem<'_>,
+    p: &mut [f64],
+    calibrated: &[f64],
+) -> super::FrameStats {
+    let mut placed = p.to_vec();
+    solver.clamp(&mut placed);
+    place_root(solver, frame, &mut placed);
     let mut best: Option<(super::FrameStats, Vec<f64>)> = None;
     for start in 0..3 {
-        let mut trial = if start == 2 { calibrated.to_vec() } else { p.to_vec() };
-        solver.clamp(&mut trial);
-        if start == 0 {
-            cold_start(solver, frame, &mut trial);
-        } else {
-            place_root(solver, frame, &mut trial);
+        let mut trial = if start == 2 { calibrated.to_vec() } else { placed.clone() };
+        match start {
+            0 => sweeps(cold, solver, frame, &mut trial),
+            1 => {}
+            _ => {
+                solver.clamp(&mut trial);
+                place_root(solver, frame, &mut trial);
+            }
         }
         let stats = solver.solve(frame, &mut trial);
         if stats.status == super::FrameStatus::TooFewMarkers {

@@ -29,6 +29,12 @@ pub struct Subproblem {
     pub markers: Vec<usize>,
     /// Entries of `y` driven by these proxies (their tracking terms join the local objective).
     pub ys: Vec<usize>,
+    /// The fit is skipped when fewer of `markers` are observed.
+    pub min_observed: usize,
+    /// Bodies these proxies move, with their descendants (ascending), and every marker on them:
+    /// what a local evaluation recomputes ([`cpu::forward_part`]); the rest stays as it is.
+    pub bodies: Vec<usize>,
+    pub placed: Vec<usize>,
 }
 
 /// The local subproblems of a model and the scratch of their fits; one per thread.
@@ -39,6 +45,8 @@ pub struct Presolver {
     pub sweeps: u32,
     /// Damped Gauss–Newton iterations per local fit (at most).
     pub iterations: u32,
+    /// A local fit stops once a kept step lowers its objective by less than this fraction.
+    pub rel_tol: f64,
     kin: Workspace,
     y: Vec<f64>,
     dphi: Vec<f64>,
@@ -106,7 +114,10 @@ impl Presolver {
                     moved.contains(&mb) || model.bodies[mb].parent.is_some_and(|p| moved.contains(&p))
                 })
                 .collect();
-            subproblems.push(Subproblem { body: b, proxies: ks, markers, ys });
+            let bodies: Vec<usize> =
+                (0..model.nb()).filter(|&c| moved.iter().any(|&a| model.is_ancestor(a, c))).collect();
+            let placed = (0..model.markers.len()).filter(|&m| bodies.contains(&model.markers[m].body)).collect();
+            subproblems.push(Subproblem { body: b, proxies: ks, markers, ys, min_observed: 2, bodies, placed });
         }
         let n = subproblems.iter().map(|s| s.proxies.len()).max().unwrap_or(0);
         let step_box = proxy
@@ -122,6 +133,7 @@ impl Presolver {
             subproblems,
             sweeps: settings.presolve_sweeps,
             iterations: 10,
+            rel_tol: 1e-4,
             kin: Workspace::new(model),
             y: vec![0.0; proxy.ny()],
             dphi: vec![0.0; proxy.terms.len()],
@@ -139,32 +151,76 @@ impl Presolver {
         }
     }
 
-    /// Pre-solves `frame` from `p` in place: root placement, then [`Presolver::sweeps`]
-    /// root-to-leaf sweeps of local fits. `solver` places the root and is left as it was.
-    pub fn run(&mut self, eval: &Evaluator<'_>, solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mut [f64]) {
-        place_root(solver, frame, p);
+    /// The local fits of the cold start's sweeps ([`super::init::cold_start`]): for each joint
+    /// of [`Presolver::new`] (pose proxies only, root to leaf), first the markers of its own body
+    /// (when at least two are observed, so that they can orient it), then those of its whole
+    /// subtree (at least one): a distal segment at a neutral pose would otherwise pull an axial
+    /// rotation the wrong way. Each fit stops as the frame solver does (relative decrease below
+    /// `rel_decrease_tol`, at most `max_iterations` steps); two sweeps.
+    pub fn cold(eval: &Evaluator<'_>, settings: &SolverSettings) -> Presolver {
+        let model = eval.model;
+        let mut pre = Presolver::new(eval, settings, false);
+        for sub in std::mem::take(&mut pre.subproblems) {
+            let b = sub.body;
+            let own = (0..model.markers.len()).filter(|&m| model.markers[m].body == b).collect();
+            let subtree = (0..model.markers.len()).filter(|&m| model.is_ancestor(b, model.markers[m].body)).collect();
+            pre.subproblems.push(Subproblem { markers: own, min_observed: 2, ..sub.clone() });
+            pre.subproblems.push(Subproblem { markers: subtree, min_observed: 1, ..sub });
+        }
+        pre.sweeps = 2;
+        pre.iterations = settings.max_iterations;
+        pre.rel_tol = settings.rel_decrease_tol;
+        pre
+    }
+
+    /// [`Presolver::sweeps`] root-to-leaf sweeps of local fits of `frame` from `p`, in place
+    /// (the root as it is).
+    pub fn sweep(&mut self, eval: &Evaluator<'_>, frame: &FrameProblem<'_>, p: &mut [f64]) {
+        self.sync(eval, p);
         for _ in 0..self.sweeps {
             for s in 0..self.subproblems.len() {
-                self.fit(eval, s, frame, p);
+                self.fit_synced(eval, s, frame, p);
             }
         }
     }
 
+    /// The whole model's kinematics at `p` into the scratch: what each local fit starts from.
+    fn sync(&mut self, eval: &Evaluator<'_>, p: &[f64]) {
+        eval.proxy.apply(p, &mut self.y, &mut self.dphi);
+        cpu::forward(eval.model, &self.y, &mut self.kin);
+    }
+
+    /// Pre-solves `frame` from `p` in place: root placement, then [`Presolver::sweeps`]
+    /// root-to-leaf sweeps of local fits. `solver` places the root and is left as it was.
+    pub fn run(&mut self, eval: &Evaluator<'_>, solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mut [f64]) {
+        place_root(solver, frame, p);
+        self.sweep(eval, frame, p);
+    }
+
     /// Fits subproblem `s` in place (a few damped Gauss–Newton steps); skipped when fewer than
-    /// two of its markers are observed.
+    /// [`Subproblem::min_observed`] of its markers are observed.
     pub fn fit(&mut self, eval: &Evaluator<'_>, s: usize, frame: &FrameProblem<'_>, p: &mut [f64]) {
+        self.sync(eval, p);
+        self.fit_synced(eval, s, frame, p);
+    }
+
+    /// [`Presolver::fit`] with the scratch's kinematics at `p` ([`Presolver::sync`]); leaves them
+    /// at the fitted `p`. Each evaluation recomputes only the subproblem's bodies and markers.
+    fn fit_synced(&mut self, eval: &Evaluator<'_>, s: usize, frame: &FrameProblem<'_>, p: &mut [f64]) {
         let observed = self.subproblems[s]
             .markers
             .iter()
             .filter(|&&m| frame.marker_weights[m] > 0.0 && !frame.observed[3 * m].is_nan())
             .count();
-        if observed < 2 {
+        if observed < self.subproblems[s].min_observed {
             return;
         }
         self.enter(s);
         let n = self.subproblems[s].proxies.len();
         let mut lambda = 1e-3;
         let mut e0 = self.local_model(eval, s, frame, p);
+        // Whether the scratch's kinematics are at `p` (not at a rejected trial point).
+        let mut at_p = true;
         for _ in 0..self.iterations {
             let mut accepted = false;
             while lambda < 1e8 {
@@ -184,11 +240,12 @@ impl Presolver {
                     self.trial[k] = (p[k] + d).clamp(self.lo[k], self.hi[k]);
                 }
                 let e1 = self.local_energy(eval, s, frame);
+                at_p = e1 < e0;
                 if e1 < e0 {
                     p.copy_from_slice(&self.trial);
                     let rel = (e0 - e1) / e0.max(f64::MIN_POSITIVE);
                     lambda = (lambda / 3.0).max(1e-9);
-                    accepted = rel > 1e-4;
+                    accepted = rel > self.rel_tol;
                     break;
                 }
                 lambda *= 4.0;
@@ -197,6 +254,11 @@ impl Presolver {
                 break;
             }
             e0 = self.local_model(eval, s, frame, p);
+        }
+        if !at_p {
+            let sub = &self.subproblems[s];
+            eval.proxy.apply(p, &mut self.y, &mut self.dphi);
+            cpu::forward_part(eval.model, &self.y, &mut self.kin, &sub.bodies, &sub.placed);
         }
         self.leave(s);
     }
@@ -221,7 +283,7 @@ impl Presolver {
         let sub = &self.subproblems[s];
         let n = sub.proxies.len();
         proxy.apply(p, &mut self.y, &mut self.dphi);
-        cpu::forward(model, &self.y, &mut self.kin);
+        cpu::forward_part(model, &self.y, &mut self.kin, &sub.bodies, &sub.placed);
         self.h[..n * n].fill(0.0);
         self.g[..n].fill(0.0);
         let mut e = 0.0;
@@ -284,7 +346,7 @@ impl Presolver {
     fn local_energy(&mut self, eval: &Evaluator<'_>, s: usize, frame: &FrameProblem<'_>) -> f64 {
         let sub = &self.subproblems[s];
         eval.proxy.apply(&self.trial, &mut self.y, &mut self.dphi);
-        cpu::forward(eval.model, &self.y, &mut self.kin);
+        cpu::forward_part(eval.model, &self.y, &mut self.kin, &sub.bodies, &sub.placed);
         let mut e = 0.0;
         for &m in &sub.markers {
             let w = frame.marker_weights[m];
@@ -312,6 +374,7 @@ impl Presolver {
         frame: &FrameProblem<'_>,
         p: &[f64],
     ) -> (Vec<f64>, Vec<f64>, f64) {
+        self.sync(eval, p);
         self.enter(s);
         let e = self.local_model(eval, s, frame, p);
         self.leave(s);
