@@ -114,8 +114,10 @@ impl From<BackendError> for Stop {
 pub const SEGMENT_FRAMES: usize = 200;
 /// Frames before a segment's first one that its lane solves first (cold-started at the first of
 /// them) and does not hand on, so that the segment starts warm, from a tracked pose, as the frame
-/// would in an uncut trial.
-pub const SEGMENT_RUN_IN: usize = 20;
+/// would in an uncut trial. Measured against the same trials solved uncut (BENCHMARKS.md,
+/// 2026-12-03, `cold3`): with 10 frames a segment's frames differ from the uncut solve's by at most
+/// 1e-12° on synthetic walks and pirouettes (as with 20), with 5 by up to 1e-9°.
+pub const SEGMENT_RUN_IN: usize = 10;
 
 /// How many [`segments`] a trial of `n` frames has: `max(1, n / SEGMENT_FRAMES)`.
 pub fn segment_count(n: usize) -> usize {
