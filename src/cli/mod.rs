@@ -172,7 +172,7 @@ pub struct BackendArgs {
     pub backend: crate::pipeline::device::BackendChoice,
     /// Lanes of the scheduler (segments in flight); default: the thread count on the CPU
     /// backend, 4096 on wgpu. A trial of n frames is cut into max(1, n / 200) segments (each
-    /// walked from 20 frames before its start), whatever the lane and thread counts: they change
+    /// walked from 10 frames before its start), whatever the lane and thread counts: they change
     /// the speed, not the result.
     #[arg(long)]
     pub lanes: Option<usize>,
