@@ -68,7 +68,8 @@ fn cold_start_all(ctx: &Context, every: usize) -> Vec<(String, Solved)> {
                 continue;
             }
             s.rmse_mm.push(st.rmse_m * 1e3);
-            s.angle_deg.push(rot.iter().map(|&k| wrap_angle(p[k] - truth[f][k]).abs().to_degrees()).fold(0.0, f64::max));
+            s.angle_deg
+                .push(rot.iter().map(|&k| wrap_angle(p[k] - truth[f][k]).abs().to_degrees()).fold(0.0, f64::max));
         }
         out.push((name, s));
     }
