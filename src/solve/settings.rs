@@ -171,6 +171,14 @@ pub struct SolverSettings {
     /// fifth of the tracking there, but 1 sends the OpenCap subject's calibration to another
     /// minimum (marker RMSE +0.006 mm) and 2 moves it by 1e-4 mm (docs/CALIBRATION.md, "Cost").
     pub calibration_track_iterations: u32,
+    /// Coverage radius of the calibration frames' choice (m): a candidate frame (one per
+    /// `calibration_track_step_s`) joins the calibration when its markers' pose (about their
+    /// centroid, rotated onto the first candidate's) is farther than this RMS distance from every
+    /// frame chosen before it, at most `calibration_frames` / `calibration_frames_motion` in all
+    /// (farthest first when more qualify); so a repetitive archive gives fewer frames than a
+    /// varied one, and a standing trial few. 0 spreads the frames evenly over time in each trial,
+    /// as before. Default 0 (docs/CALIBRATION.md, "Cost").
+    pub calibration_coverage_m: f64,
     /// Marker registration: calibration estimates every marker's body-frame offset together with
     /// the scales and the calibration poses, offsets held near the model's (anatomical markers
     /// strongly, tracking markers weakly). Default true; off with `--no-register`, and an
@@ -288,6 +296,7 @@ impl Default for SolverSettings {
             calibration_frames_motion: 96,
             calibration_track_step_s: 0.1,
             calibration_track_iterations: 0,
+            calibration_coverage_m: 0.0,
             registration: true,
             registration_anatomical_sd_m: 0.004,
             registration_tracking_sd_m: 0.1,
