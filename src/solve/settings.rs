@@ -156,9 +156,12 @@ pub struct SolverSettings {
     /// Root-to-leaf sweeps per pre-solve. Default 2 (the second corrects parents for their
     /// children's new poses, as the overlapping subproblems share markers).
     pub presolve_sweeps: u32,
-    /// Frames used by calibration from motion trials when there is no static trial, spread over
-    /// all of the subject's trials (`calibration_frames` applies to a static trial). Default 96
-    /// (48 gives 0.7 mm more RMSE on the OpenCap subject; calibration time grows linearly).
+    /// Frames used by calibration from a subject's motion trials, spread evenly over each trial
+    /// (this many shared between them, rounded up per trial). Default 56 (96 before): with the
+    /// default tracking, the OpenCap subject's every trial mean and worst core angle against
+    /// AddBiomechanics is better than with 96 and its pooled marker RMSE lower (12.43 against
+    /// 12.47 mm); 48 made every trial worse, 64 about as 96 (docs/CALIBRATION.md, "Cost");
+    /// calibration time grows linearly.
     pub calibration_frames_motion: usize,
     /// Time between the frames tracked (pose only, each warm-started from the one before) from a
     /// trial's first usable frame to its calibration frames, so that each calibration frame
@@ -296,7 +299,7 @@ impl Default for SolverSettings {
             marker_placement: false,
             presolve: Presolve::default(),
             presolve_sweeps: 2,
-            calibration_frames_motion: 96,
+            calibration_frames_motion: 56,
             calibration_track_step_s: 0.1,
             calibration_track_iterations: 1,
             calibration_coverage_m: 0.0,
