@@ -13,7 +13,7 @@
 //! `--place-markers`) then moves the unfixed markers as OpenSim does.
 
 use super::calibration_frames::{choose, TrialScan};
-use super::frames::{for_each_window, TrialFrames};
+use super::frames::TrialFrames;
 use super::trial::{match_markers, no_match, observations, TrialError};
 use super::Context;
 use crate::io::MarkerTrial;
@@ -29,11 +29,6 @@ use crate::solve::prior::{
 use crate::solve::FunctionalHips;
 use crate::solve::{make_qp, Calibration, FrameSolver};
 use nalgebra::{DVector, Vector3};
-
-/// Markers observed in a frame that the solver uses (weight > 0).
-fn observed_count(obs: &[f64], weights: &[f64]) -> usize {
-    obs.chunks_exact(3).zip(weights).filter(|(c, &w)| w > 0.0 && c.iter().all(|v| !v.is_nan())).count()
-}
 
 /// Frames between tracked frames: `step_s` at `rate_hz`, at least 1 (every frame when the rate
 /// is unknown or `step_s` is 0).
@@ -296,45 +291,14 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
         if map.iter().all(Option::is_none) {
             return Err(no_match(ctx, name, header));
         }
-        let w1 = first_w(kind);
-        let n = header.n_frames();
-        let every = (n / 20).max(1);
-        let mut counts = Vec::with_capacity(n);
-        let mut sample = Vec::new();
         let read = |why: String| TrialError::Read { trial: name.to_string(), why };
-        for_each_window(*t, |_, w| {
-            let o = observations(w, &map);
-            counts.extend(o.chunks_exact(stride).map(|row| observed_count(row, w1)));
-        })
-        .map_err(read)?;
         let step = track_step(settings.calibration_track_step_s, header.rate_hz);
-        let mut candidates: Vec<usize> = Vec::new();
-        let ok = TrialScan::good(&counts, settings.min_markers);
-        for f in 0..n {
-            if ok(f) && candidates.last().is_none_or(|&l| f >= l + step) {
-                candidates.push(f);
-            }
-        }
-        drop(ok);
-        let mut rows = Vec::with_capacity(candidates.len() * stride);
-        let mut next = candidates.iter().copied().peekable();
-        for_each_window(*t, |first, w| {
-            let o = observations(w, &map);
-            for (f, row) in o.chunks_exact(stride).enumerate() {
-                if (first + f) % every == 0 {
-                    sample.extend_from_slice(row);
-                }
-                if next.peek() == Some(&(first + f)) {
-                    next.next();
-                    rows.extend_from_slice(row);
-                }
-            }
-        })
-        .map_err(read)?;
+        let (scan, sample) = TrialScan::of(*t, &map, first_w(kind), step, settings.min_markers).map_err(read)?;
         units_check(ctx, name, &sample, stride, all_w(kind), &p0)?;
-        scans.push((map, TrialScan { counts, candidates, rows }));
+        scans.push((map, scan));
     }
-    // The frames: over each group's range of poses (`calibration_frames`).
+    // Each group's frames (statics, motions): spread over time, or over the range of poses
+    // (`calibration_coverage_m`).
     let mut chosen: Vec<Vec<usize>> = Vec::with_capacity(inputs.len());
     for kind in [Kind::Static, Kind::Motion] {
         let group: Vec<&TrialScan> =

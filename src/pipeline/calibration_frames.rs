@@ -7,7 +7,14 @@
 //! the group observes, about their centroid, rotated onto the group's first candidate (Kabsch);
 //! two frames differ by the RMS distance of those markers.
 
+use super::frames::{for_each_window, TrialFrames};
+use super::trial::observations;
 use nalgebra::{Matrix3, Vector3};
+
+/// Markers observed in a frame that the solver uses (weight > 0).
+fn observed_count(obs: &[f64], weights: &[f64]) -> usize {
+    obs.chunks_exact(3).zip(weights).filter(|(c, &w)| w > 0.0 && c.iter().all(|v| !v.is_nan())).count()
+}
 
 /// One trial's frames as calibration's first pass saw them.
 pub struct TrialScan {
@@ -20,6 +27,49 @@ pub struct TrialScan {
 }
 
 impl TrialScan {
+    /// Trial `t`'s scan with its markers `map` and the first stage's `weights`: candidates one
+    /// per `step` frames at least among the good frames (`min` markers); also every
+    /// (n / 20)th frame's observations, for the units check.
+    pub fn of<T: TrialFrames + ?Sized>(
+        t: &T,
+        map: &[Option<usize>],
+        weights: &[f64],
+        step: usize,
+        min: usize,
+    ) -> Result<(TrialScan, Vec<f64>), String> {
+        let stride = 3 * map.len();
+        let n = t.header().n_frames();
+        let every = (n / 20).max(1);
+        let mut counts = Vec::with_capacity(n);
+        for_each_window(t, |_, w| {
+            let o = observations(w, map);
+            counts.extend(o.chunks_exact(stride).map(|row| observed_count(row, weights)));
+        })?;
+        let mut candidates: Vec<usize> = Vec::new();
+        let ok = TrialScan::good(&counts, min);
+        for f in 0..n {
+            if ok(f) && candidates.last().is_none_or(|&l| f >= l + step) {
+                candidates.push(f);
+            }
+        }
+        drop(ok);
+        let (mut rows, mut sample) = (Vec::with_capacity(candidates.len() * stride), Vec::new());
+        let mut next = candidates.iter().copied().peekable();
+        for_each_window(t, |first, w| {
+            let o = observations(w, map);
+            for (f, row) in o.chunks_exact(stride).enumerate() {
+                if (first + f) % every == 0 {
+                    sample.extend_from_slice(row);
+                }
+                if next.peek() == Some(&(first + f)) {
+                    next.next();
+                    rows.extend_from_slice(row);
+                }
+            }
+        })?;
+        Ok((TrialScan { counts, candidates, rows }, sample))
+    }
+
     /// Whether frame `f` (of `counts`) is good enough to calibrate on: at least `min` observed
     /// markers and within two of the trial's best frame.
     pub fn good(counts: &[usize], min: usize) -> impl Fn(usize) -> bool + '_ {
