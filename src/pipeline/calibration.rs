@@ -293,7 +293,8 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
         }
         let read = |why: String| TrialError::Read { trial: name.to_string(), why };
         let step = track_step(settings.calibration_track_step_s, header.rate_hz);
-        let (scan, sample) = TrialScan::of(*t, &map, first_w(kind), step, settings.min_markers).map_err(read)?;
+        let rows = settings.calibration_coverage_m > 0.0;
+        let (scan, sample) = TrialScan::of(*t, &map, first_w(kind), step, settings.min_markers, rows).map_err(read)?;
         units_check(ctx, name, &sample, stride, all_w(kind), &p0)?;
         scans.push((map, scan));
     }

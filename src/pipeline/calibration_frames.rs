@@ -22,28 +22,35 @@ pub struct TrialScan {
     pub counts: Vec<usize>,
     /// Candidate frames (ascending): frames with enough markers, at most one per track step.
     pub candidates: Vec<usize>,
-    /// Each candidate's observations (`3 × markers` values, NaN gaps).
+    /// Each candidate's observations (`3 × markers` values, NaN gaps); empty when not asked for.
     pub rows: Vec<f64>,
 }
 
 impl TrialScan {
     /// Trial `t`'s scan with its markers `map` and the first stage's `weights`: candidates one
-    /// per `step` frames at least among the good frames (`min` markers); also every
-    /// (n / 20)th frame's observations, for the units check.
+    /// per `step` frames at least among the good frames (`min` markers), with their observations
+    /// when `rows` (a second pass over the trial: the candidates need the whole trial's counts);
+    /// also every (n / 20)th frame's observations, for the units check.
     pub fn of<T: TrialFrames + ?Sized>(
         t: &T,
         map: &[Option<usize>],
         weights: &[f64],
         step: usize,
         min: usize,
+        rows: bool,
     ) -> Result<(TrialScan, Vec<f64>), String> {
         let stride = 3 * map.len();
         let n = t.header().n_frames();
         let every = (n / 20).max(1);
-        let mut counts = Vec::with_capacity(n);
-        for_each_window(t, |_, w| {
+        let (mut counts, mut sample) = (Vec::with_capacity(n), Vec::new());
+        for_each_window(t, |first, w| {
             let o = observations(w, map);
-            counts.extend(o.chunks_exact(stride).map(|row| observed_count(row, weights)));
+            for (f, row) in o.chunks_exact(stride).enumerate() {
+                counts.push(observed_count(row, weights));
+                if (first + f) % every == 0 {
+                    sample.extend_from_slice(row);
+                }
+            }
         })?;
         let mut candidates: Vec<usize> = Vec::new();
         let ok = TrialScan::good(&counts, min);
@@ -53,21 +60,21 @@ impl TrialScan {
             }
         }
         drop(ok);
-        let (mut rows, mut sample) = (Vec::with_capacity(candidates.len() * stride), Vec::new());
-        let mut next = candidates.iter().copied().peekable();
-        for_each_window(t, |first, w| {
-            let o = observations(w, map);
-            for (f, row) in o.chunks_exact(stride).enumerate() {
-                if (first + f) % every == 0 {
-                    sample.extend_from_slice(row);
+        let mut kept = Vec::new();
+        if rows {
+            kept.reserve(candidates.len() * stride);
+            let mut next = candidates.iter().copied().peekable();
+            for_each_window(t, |first, w| {
+                let o = observations(w, map);
+                for (f, row) in o.chunks_exact(stride).enumerate() {
+                    if next.peek() == Some(&(first + f)) {
+                        next.next();
+                        kept.extend_from_slice(row);
+                    }
                 }
-                if next.peek() == Some(&(first + f)) {
-                    next.next();
-                    rows.extend_from_slice(row);
-                }
-            }
-        })?;
-        Ok((TrialScan { counts, candidates, rows }, sample))
+            })?;
+        }
+        Ok((TrialScan { counts, candidates, rows: kept }, sample))
     }
 
     /// Whether frame `f` (of `counts`) is good enough to calibrate on: at least `min` observed
