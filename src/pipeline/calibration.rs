@@ -12,7 +12,8 @@
 //! Without registration, step 2 runs on all markers; an OpenSim `MarkerPlacer` (or
 //! `--place-markers`) then moves the unfixed markers as OpenSim does.
 
-use super::frames::{for_each_window, TrialFrames};
+use super::calibration_frames::{choose, TrialScan};
+use super::frames::TrialFrames;
 use super::trial::{match_markers, no_match, observations, TrialError};
 use super::Context;
 use crate::io::MarkerTrial;
@@ -28,23 +29,6 @@ use crate::solve::prior::{
 use crate::solve::FunctionalHips;
 use crate::solve::{make_qp, Calibration, FrameSolver};
 use nalgebra::{DVector, Vector3};
-
-/// Markers observed in a frame that the solver uses (weight > 0).
-fn observed_count(obs: &[f64], weights: &[f64]) -> usize {
-    obs.chunks_exact(3).zip(weights).filter(|(c, &w)| w > 0.0 && c.iter().all(|v| !v.is_nan())).count()
-}
-
-/// Up to `k` frames spread evenly over those with the most observed markers (`counts`: observed
-/// weighted markers per frame).
-fn calibration_frames(counts: &[usize], k: usize, min: usize) -> Vec<usize> {
-    let best = counts.iter().copied().max().unwrap_or(0);
-    let good: Vec<usize> = (0..counts.len()).filter(|&f| counts[f] >= min && counts[f] + 2 >= best).collect();
-    if good.is_empty() || k == 0 {
-        return good;
-    }
-    let n = good.len().min(k);
-    (0..n).map(|i| good[(i * good.len()) / n + good.len() / (2 * n)]).collect()
-}
 
 /// Frames between tracked frames: `step_s` at `rate_hz`, at least 1 (every frame when the rate
 /// is unknown or `step_s` is 0).
@@ -296,44 +280,52 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
     let mut kinds: Vec<Kind> = Vec::new();
     // Each calibration frame's trial (index in statics, then motions).
     let mut trial_of: Vec<usize> = Vec::new();
-    let inputs = statics.iter().map(|t| (t, Kind::Static)).chain(motions.iter().map(|t| (t, Kind::Motion)));
-    for (input, ((name, t), kind)) in inputs.enumerate() {
-        let wanted =
-            if kind == Kind::Static { settings.calibration_frames } else { settings.calibration_frames_motion };
-        let count = if kind == Kind::Static { statics.len() } else { motions.len() };
-        let per_trial = wanted.div_ceil(count.max(1));
+    let inputs: Vec<(&(&str, &T), Kind)> =
+        statics.iter().map(|t| (t, Kind::Static)).chain(motions.iter().map(|t| (t, Kind::Motion))).collect();
+    // First pass, trial by trial: the markers matched, observed markers per frame, the frames
+    // the units check looks at (every (n / 20)th) and the candidate calibration frames.
+    let mut scans: Vec<(Vec<Option<usize>>, TrialScan)> = Vec::with_capacity(inputs.len());
+    for &((name, t), kind) in &inputs {
         let header = t.header();
         let map = match_markers(ctx, name, header)?.columns;
         if map.iter().all(Option::is_none) {
             return Err(no_match(ctx, name, header));
         }
-        let w1 = first_w(kind);
-        // One pass over the trial's windows: observed markers per frame, and the frames the
-        // units check looks at (every (n / 20)th).
-        let n = header.n_frames();
-        let every = (n / 20).max(1);
-        let mut counts = Vec::with_capacity(n);
-        let mut sample = Vec::new();
         let read = |why: String| TrialError::Read { trial: name.to_string(), why };
-        for_each_window(*t, |first, w| {
-            let o = observations(w, &map);
-            for (f, row) in o.chunks_exact(stride).enumerate() {
-                counts.push(observed_count(row, w1));
-                if (first + f) % every == 0 {
-                    sample.extend_from_slice(row);
-                }
-            }
-        })
-        .map_err(read)?;
+        let step = track_step(settings.calibration_track_step_s, header.rate_hz);
+        let rows = settings.calibration_coverage_m > 0.0;
+        let (scan, sample) = TrialScan::of(*t, &map, first_w(kind), step, settings.min_markers, rows).map_err(read)?;
         units_check(ctx, name, &sample, stride, all_w(kind), &p0)?;
-        let chosen = calibration_frames(&counts, per_trial, settings.min_markers);
+        scans.push((map, scan));
+    }
+    // Each group's frames (statics, motions): spread over time, or over the range of poses
+    // (`calibration_coverage_m`).
+    let mut chosen: Vec<Vec<usize>> = Vec::with_capacity(inputs.len());
+    for kind in [Kind::Static, Kind::Motion] {
+        let group: Vec<&TrialScan> =
+            inputs.iter().zip(&scans).filter(|((_, k), _)| *k == kind).map(|(_, (_, s))| s).collect();
+        let wanted =
+            if kind == Kind::Static { settings.calibration_frames } else { settings.calibration_frames_motion };
+        chosen.extend(choose(&group, first_w(kind), settings.min_markers, wanted, settings.calibration_coverage_m));
+    }
+    for (input, ((((name, t), kind), (map, scan)), chosen)) in inputs.iter().zip(&scans).zip(&chosen).enumerate() {
         let Some(&last) = chosen.last() else { continue };
+        let kind = *kind;
+        let read = |why: String| TrialError::Read { trial: name.to_string(), why };
         // Track from the first usable frame to the last chosen one so that every chosen frame
         // starts from a pose continuous with the motion (a cold start far into a motion can land
         // in a wrong local minimum): every frame `calibration_track_step_s` apart (at least every
-        // frame; the chosen ones always), each warm-started from the one before.
-        let begin = (0..=last).find(|&f| counts[f] >= settings.min_markers).unwrap_or(0);
-        let step = track_step(settings.calibration_track_step_s, header.rate_hz);
+        // frame; the chosen ones always), each warm-started from the one before. A static trial
+        // does not move: its chosen frames alone, each from the one before.
+        let counts = &scan.counts;
+        let (begin, step) = match kind {
+            Kind::Static => (chosen[0], usize::MAX),
+            _ => (
+                (0..=last).find(|&f| counts[f] >= settings.min_markers).unwrap_or(0),
+                track_step(settings.calibration_track_step_s, t.header().rate_hz),
+            ),
+        };
+        let w1 = first_w(kind);
         let (tracking_ref, tracking_weights) = tracking_of(kind);
         let template = FrameProblem { observed: &[], marker_weights: w1, tracking_ref, tracking_weights };
         let mut tracker = Tracker::new(&mut solver, &p0);
@@ -342,7 +334,7 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
         while a <= last {
             let b = a.saturating_add(t.window_frames().max(1)).min(last + 1);
             let w = t.window(a..b).map_err(read)?;
-            let o = observations(&w, &map);
+            let o = observations(&w, map);
             for (i, row) in o.chunks_exact(stride).enumerate() {
                 let is_chosen = next.peek() == Some(&(a + i));
                 if !is_chosen && (a + i - begin) % step != 0 {

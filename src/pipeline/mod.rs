@@ -3,6 +3,7 @@
 //! OpenSim (`.mot` motions, scaled `.osim` models).
 
 pub mod calibration;
+pub mod calibration_frames;
 pub mod context;
 pub mod continuity;
 pub mod convention;
