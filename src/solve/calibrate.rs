@@ -25,7 +25,7 @@ use super::fixed;
 use super::init::multi_start;
 use super::prior::{GlobalTerm, Globals};
 use super::qp::{BoxQp, ClarabelQp, LinearConstraints, QpProblem, QpSolver};
-use super::schur::Linear;
+use super::schur::{Eliminated, Linear};
 use super::settings::SolverSettings;
 use super::trqp::FrameSolver;
 use crate::kinematics::assembly::{EvalWorkspace, Evaluator, FrameProblem};
@@ -287,11 +287,17 @@ impl JointProblem<'_> {
         // The cap counts kept steps (a run of rejected ones ends when the damping passes 1e8).
         let gain_ratio = s.calibration_gain_ratio;
         // The linearisation at the current state, kept across rejected steps.
-        let mut linear: Option<Linear> = None;
+        let mut linear = Linear::default();
+        let mut fresh = false;
+        let mut elim = Eliminated::default();
         while iterations - rejected < s.calibration_max_iterations && !self.frames.is_empty() {
             iterations += 1;
-            let lin = linear.get_or_insert_with(|| self.linearize(state, (&scale, &pose), &cols, nz));
-            let (mut schur, reduced, blocks) = self.eliminate(lin, lambda);
+            if !fresh {
+                self.linearize(state, (&scale, &pose), &cols, nz, &mut linear);
+                fresh = true;
+            }
+            let lin = &linear;
+            let (mut schur, reduced) = self.eliminate(lin, lambda, &mut elim);
             let neg_gz = &lin.neg_gz;
             // `rhs` is −g_z plus the poses' elimination, Σ Uᵀw.
             let rhs = neg_gz + reduced;
@@ -346,11 +352,13 @@ impl JointProblem<'_> {
             // Decrease the damped model predicts, ½ (δᵀ λD δ − gᵀδ) over poses and z.
             let mut predicted = 0.5 * (dz.dot(&damping_z.component_mul(&dz)) + neg_gz.dot(&dz));
             let ds = dz.rows(0, ns).into_owned();
-            for ((p, block), f) in next.poses.iter_mut().zip(&blocks).zip(&lin.frames) {
+            for ((p, fb), f) in next.poses.iter_mut().zip(&elim.blocks).zip(&lin.frames) {
                 for (i, &k) in scale.iter().enumerate() {
                     p[k] = (p[k] + ds[i]).clamp(lo[k], hi[k]);
                 }
-                let Some(fb) = block else { continue };
+                if !fb.ok {
+                    continue;
+                }
                 let mut dq = &fb.w + fixed::mul_v(&fb.u, &dz);
                 fb.l.tr_solve_lower_triangular_unchecked_mut(&mut dq);
                 dq.neg_mut();
@@ -364,7 +372,7 @@ impl JointProblem<'_> {
                 let rel = (energy - e1) / energy.max(f64::MIN_POSITIVE);
                 let energy_before = energy;
                 *state = next;
-                linear = None;
+                fresh = false;
                 energy = e1;
                 rmse = r1;
                 if gain_ratio {

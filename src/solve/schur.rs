@@ -17,17 +17,22 @@ use crate::model::proxy::ProxyKind;
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
 /// Per-frame blocks of the Schur complement: `A = L Lᵀ`, `U = L⁻¹ B`, `w = L⁻¹ g_q`, so that
-/// `Bᵀ A⁻¹ B = UᵀU`, `Bᵀ A⁻¹ g_q = Uᵀw` and `Δq = −L⁻ᵀ (w + U Δz)`.
+/// `Bᵀ A⁻¹ B = UᵀU`, `Bᵀ A⁻¹ g_q = Uᵀw` and `Δq = −L⁻ᵀ (w + U Δz)`. Kept across steps (its
+/// buffers are overwritten in place: no fresh pages per step).
+#[derive(Default)]
 pub(super) struct FrameBlocks {
     pub(super) l: DMatrix<f64>,
     pub(super) u: DMatrix<f64>,
     pub(super) w: DVector<f64>,
     /// The damping added to `A`'s diagonal (for the predicted decrease).
     pub(super) damping: DVector<f64>,
+    /// False where the damped pose block is not positive definite (the frame's poses stay).
+    pub(super) ok: bool,
 }
 
 /// One frame's Gauss–Newton blocks at the current state, undamped: the pose block `A` (coordinate
 /// targets and markers), the pose gradient and the pose–`z` coupling `B`.
+#[derive(Default)]
 pub(super) struct FrameLinear {
     pub(super) a: DMatrix<f64>,
     pub(super) gq: DVector<f64>,
@@ -35,17 +40,50 @@ pub(super) struct FrameLinear {
 }
 
 /// The whole problem linearised at the current state: kept while Levenberg–Marquardt rejects
-/// steps (only the damping changes), rebuilt after an accepted one.
+/// steps (only the damping changes), rebuilt in place after an accepted one.
+#[derive(Default)]
 pub(super) struct Linear {
     /// `C + Σ_k C_k` over `z` (priors, and each frame's scale and offset blocks).
     pub(super) c: DMatrix<f64>,
     /// `−g_z`.
     pub(super) neg_gz: DVector<f64>,
     pub(super) frames: Vec<FrameLinear>,
+    /// Each piece's partial sums of `c` and `−g_z`.
+    pieces: Vec<(DMatrix<f64>, DVector<f64>)>,
 }
 
-/// The reduced system `S`, `Σ_k Uᵀw` and each frame's blocks ([`JointProblem::eliminate`]).
-pub(super) type Eliminated = (DMatrix<f64>, DVector<f64>, Vec<Option<FrameBlocks>>);
+/// The elimination's buffers, kept across steps: each frame's blocks and each piece's partial
+/// sums of the reduced system and of `Σ_k Uᵀw` ([`JointProblem::eliminate`]).
+#[derive(Default)]
+pub(super) struct Eliminated {
+    pub(super) blocks: Vec<FrameBlocks>,
+    pieces: Vec<(DMatrix<f64>, DVector<f64>)>,
+}
+
+/// `m` resized to `r × c` (left as is, contents and all, when it already has that shape).
+fn shaped(m: &mut DMatrix<f64>, r: usize, c: usize) -> &mut DMatrix<f64> {
+    if m.shape() != (r, c) {
+        *m = DMatrix::zeros(r, c);
+    }
+    m
+}
+
+/// `v` resized to `n` (left as is when it already has that length).
+fn sized(v: &mut DVector<f64>, n: usize) -> &mut DVector<f64> {
+    if v.len() != n {
+        *v = DVector::zeros(n);
+    }
+    v
+}
+
+/// Piece buffers: one `(n × n, n)` pair per piece of `frames` frames, zeroed.
+fn zeroed_pieces(p: &mut Vec<(DMatrix<f64>, DVector<f64>)>, frames: usize, n: usize) {
+    p.resize_with(frames.div_ceil(ELIMINATION_PIECE), Default::default);
+    for (m, v) in p.iter_mut() {
+        shaped(m, n, n).fill(0.0);
+        sized(v, n).fill(0.0);
+    }
+}
 
 /// Frames per piece of the parallel elimination. Fixed, so that the pieces' partial sums (added
 /// in piece order) and hence every bit of the result do not depend on the thread count.
@@ -85,26 +123,29 @@ impl JointProblem<'_> {
         depth
     }
 
-    /// The Gauss–Newton blocks of every frame and of the priors at `state`.
+    /// The Gauss–Newton blocks of every frame and of the priors at `state`, into `out` (its
+    /// buffers reused).
     pub(super) fn linearize(
         &self,
         state: &JointState,
         (scale, pose): (&[usize], &[usize]),
         cols: &[Option<usize>],
         nz: usize,
-    ) -> Linear {
+        out: &mut Linear,
+    ) {
         let nq = pose.len();
         let model = self.model_with(&state.offsets);
         let eval = Evaluator::new(&model, self.proxy);
-        let mut c = DMatrix::<f64>::zeros(nz, nz);
-        let mut neg_gz = DVector::<f64>::zeros(nz);
+        let Linear { c, neg_gz, frames, pieces } = out;
+        shaped(c, nz, nz).fill(0.0);
+        sized(neg_gz, nz).fill(0.0);
         {
             let g = Globals { p: &state.poses[0], scale, offsets: &state.offsets, offset_col: cols };
             let mut gz = DVector::zeros(nz);
             for t in self.terms {
-                t.add(&g, Some((&mut c, &mut gz)));
+                t.add(&g, Some((&mut *c, &mut gz)));
             }
-            neg_gz -= gz;
+            *neg_gz -= gz;
         }
         // Frames in pieces of [`ELIMINATION_PIECE`] in parallel, each piece with its own
         // workspace and partial sums, added in piece order (the same bits whatever the threads).
@@ -116,14 +157,14 @@ impl JointProblem<'_> {
         pose.iter().enumerate().for_each(|(i, &k)| pose_row[k] = Some(i));
         scale.iter().enumerate().for_each(|(i, &k)| scale_col[k] = Some(i));
         let idx: Vec<usize> = (0..self.frames.len()).collect();
-        let pieces: Vec<(DMatrix<f64>, DVector<f64>, Vec<FrameLinear>)> = idx
-            .par_chunks(ELIMINATION_PIECE)
-            .map(|piece| {
+        frames.resize_with(self.frames.len(), Default::default);
+        zeroed_pieces(pieces, self.frames.len(), nz);
+        idx.par_chunks(ELIMINATION_PIECE)
+            .zip(frames.par_chunks_mut(ELIMINATION_PIECE))
+            .zip(pieces.par_iter_mut())
+            .for_each(|((piece, piece_frames), (c, neg_gz))| {
                 let mut ws = EvalWorkspace::new(&model, self.proxy);
-                let mut c = DMatrix::<f64>::zeros(nz, nz);
-                let mut neg_gz = DVector::<f64>::zeros(nz);
-                let mut frames = Vec::with_capacity(piece.len());
-                for &k in piece {
+                for (&k, f) in piece.iter().zip(piece_frames) {
                     let (obs, p, mw) = (self.frames[k], &state.poses[k], self.weights[k]);
                     // The frame's Gauss–Newton model over all proxies (markers and coordinate
                     // targets, per body as the frame solver forms it): `A`, `g_q`, and the scale
@@ -137,15 +178,19 @@ impl JointProblem<'_> {
                     eval.linearize(p, &fp, &mut ws);
                     let h = &ws.gn.h;
                     let (hs, np) = (h.as_slice(), h.nrows());
-                    let mut a = DMatrix::zeros(nq, nq);
+                    let FrameLinear { a, gq, b } = f;
+                    let a = shaped(a, nq, nq);
                     for (col, &kj) in a.as_mut_slice().chunks_exact_mut(nq).zip(pose) {
                         let hj = &hs[kj * np..(kj + 1) * np];
                         for (v, &ki) in col.iter_mut().zip(pose) {
                             *v = hj[ki];
                         }
                     }
-                    let mut gq = DVector::from_iterator(nq, pose.iter().map(|&k| ws.gn.g[k]));
-                    let mut b = DMatrix::zeros(nq, nz);
+                    for (v, &k) in sized(gq, nq).iter_mut().zip(pose) {
+                        *v = ws.gn.g[k];
+                    }
+                    let b = shaped(b, nq, nz);
+                    b.fill(0.0);
                     for (c_, &ks) in scale.iter().enumerate() {
                         for (r_, &kq) in pose.iter().enumerate() {
                             b[(r_, c_)] = h[(kq, ks)];
@@ -205,67 +250,60 @@ impl JointProblem<'_> {
                             b.row_mut(i).fill(0.0);
                         }
                     }
-                    frames.push(FrameLinear { a, gq, b });
                 }
-                (c, neg_gz, frames)
-            })
-            .collect();
-        let mut frames = Vec::with_capacity(self.frames.len());
-        for (pc, pg, pf) in pieces {
-            c += pc;
-            neg_gz += pg;
-            frames.extend(pf);
+            });
+        for (pc, pg) in pieces.iter() {
+            *c += pc;
+            *neg_gz += pg;
         }
-        Linear { c, neg_gz, frames }
     }
 
     /// Eliminates every frame's poses at damping `lambda`: the reduced system
-    /// `S = C − Σ_k UᵀU` (undamped in `z`), `Σ_k Uᵀw`, and each frame's blocks (`None` where its
-    /// damped pose block is not positive definite). Frames are eliminated in pieces of
-    /// [`ELIMINATION_PIECE`] in parallel, the pieces' sums added in order.
-    pub(super) fn eliminate(&self, lin: &Linear, lambda: f64) -> Eliminated {
+    /// `S = C − Σ_k UᵀU` (undamped in `z`) and `Σ_k Uᵀw`, each frame's blocks into `out` (its
+    /// buffers reused; `ok` false where the damped pose block is not positive definite). Frames
+    /// are eliminated in pieces of [`ELIMINATION_PIECE`] in parallel, the pieces' sums added in
+    /// order.
+    pub(super) fn eliminate(&self, lin: &Linear, lambda: f64, out: &mut Eliminated) -> (DMatrix<f64>, DVector<f64>) {
         use rayon::prelude::*;
         let nz = lin.c.nrows();
         let floor = self.settings.damping_floor;
-        let pieces: Vec<Eliminated> = lin
-            .frames
+        let Eliminated { blocks, pieces } = out;
+        blocks.resize_with(lin.frames.len(), Default::default);
+        zeroed_pieces(pieces, lin.frames.len(), nz);
+        lin.frames
             .par_chunks(ELIMINATION_PIECE)
-            .map(|piece| {
-                let mut s = DMatrix::<f64>::zeros(nz, nz);
-                let mut reduced = DVector::<f64>::zeros(nz);
-                let mut blocks = Vec::with_capacity(piece.len());
-                for f in piece {
+            .zip(blocks.par_chunks_mut(ELIMINATION_PIECE))
+            .zip(pieces.par_iter_mut())
+            .for_each(|((piece, piece_blocks), (s, reduced))| {
+                for (f, fb) in piece.iter().zip(piece_blocks) {
                     let nq = f.a.nrows();
                     let mut a = f.a.clone();
-                    let damping = DVector::from_fn(nq, |d, _| lambda * a[(d, d)].max(floor));
+                    let damping = sized(&mut fb.damping, nq);
                     for d in 0..nq {
+                        damping[d] = lambda * a[(d, d)].max(floor);
                         a[(d, d)] += damping[d];
                     }
                     let Some(chol) = a.cholesky() else {
-                        blocks.push(None);
+                        fb.ok = false;
                         continue;
                     };
-                    let l = chol.unpack();
-                    let mut u = f.b.clone();
-                    fixed::solve_lower_sparse(&l, &mut u);
-                    let mut w = f.gq.clone();
-                    l.solve_lower_triangular_unchecked_mut(&mut w);
-                    fixed::add_t_mul_sym_sparse(&mut s, -1.0, &u);
+                    fb.ok = true;
+                    fb.l = chol.unpack();
+                    shaped(&mut fb.u, nq, nz).copy_from(&f.b);
+                    fixed::solve_lower_sparse(&fb.l, &mut fb.u);
+                    sized(&mut fb.w, nq).copy_from(&f.gq);
+                    fb.l.solve_lower_triangular_unchecked_mut(&mut fb.w);
+                    fixed::add_t_mul_sym_sparse(s, -1.0, &fb.u);
 
-                    reduced += fixed::t_mul_v(&u, &w);
-                    blocks.push(Some(FrameBlocks { l, u, w, damping }));
+                    *reduced += fixed::t_mul_v(&fb.u, &fb.w);
                 }
-                (s, reduced, blocks)
-            })
-            .collect();
+            });
         let mut schur = lin.c.clone();
         let mut reduced = DVector::<f64>::zeros(nz);
-        let mut blocks = Vec::with_capacity(lin.frames.len());
-        for (s, r, b) in pieces {
+        for (s, r) in pieces.iter() {
             schur += s;
             reduced += r;
-            blocks.extend(b);
         }
-        (schur, reduced, blocks)
+        (schur, reduced)
     }
 }
