@@ -148,8 +148,8 @@ impl<'m> Evaluator<'m> {
     pub fn linearize(&self, p: &[f64], frame: &FrameProblem<'_>, ws: &mut EvalWorkspace) {
         let (energy, sq, used) = self.energy(p, frame, ws);
         let EvalWorkspace { kin, y, dphi, gn, aw, row, block, gpart } = ws;
-        gn.h.fill(0.0);
-        gn.g.fill(0.0);
+        gn.h.as_mut_slice().fill(0.0);
+        gn.g.as_mut_slice().fill(0.0);
         gn.energy = energy;
         gn.marker_sq_sum = sq;
         gn.markers_used = used;

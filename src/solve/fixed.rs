@@ -228,20 +228,26 @@ fn t_mul_sym_tiles<R: Iterator<Item = usize>>(
 /// markers on different limbs share only the root's and trunk's.
 pub fn add_t_mul_sym_sparse(out: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>) {
     let (n, m) = (a.nrows(), a.ncols());
-    if n > 64 || a.iter().any(|v| !v.is_finite()) {
+    if n > 64 {
         return add_t_mul_sym_tiled(out, alpha, a);
     }
     let data = a.as_slice();
-    let mask = |j: usize| -> u64 {
+    // Each column's non-zero rows, and whether every value is finite (in the same pass).
+    let mut finite = true;
+    let mut mask = |j: usize| -> u64 {
         let mut bits = 0u64;
         for (k, v) in data[j * n..(j + 1) * n].iter().enumerate() {
+            finite &= v.is_finite();
             if *v != 0.0 {
                 bits |= 1 << k;
             }
         }
         bits
     };
-    let masks: Vec<u64> = (0..m).map(mask).collect();
+    let masks: Vec<u64> = (0..m).map(&mut mask).collect();
+    if !finite {
+        return add_t_mul_sym_tiled(out, alpha, a);
+    }
     let tiles: Vec<u64> = masks.chunks(4).map(|t| t.iter().fold(0, |a, b| a | b)).collect();
     t_mul_sym_tiles(
         out,
@@ -259,6 +265,19 @@ pub fn add_t_mul_sym_sparse(out: &mut DMatrix<f64>, alpha: f64, a: &DMatrix<f64>
 /// zeros (with a non-finite value anywhere, nalgebra's solve runs instead); with the poses ordered leaves first (`solve::calibrate`), a marker's column has
 /// non-zeros only on its chain to the root and `L` no fill, so most of the work is skipped.
 pub fn solve_lower_sparse(l: &DMatrix<f64>, b: &mut DMatrix<f64>) {
+    solve_lower_sparse_in(l, b, &mut SparseScratch::default());
+}
+
+/// The index lists [`solve_lower_sparse_in`] builds, kept by a caller that solves many systems.
+#[derive(Default)]
+pub struct SparseScratch {
+    /// Each column's below-diagonal non-zeros of `l`, as (row, value), columns one after another.
+    below: Vec<(usize, f64)>,
+    start: Vec<usize>,
+}
+
+/// [`solve_lower_sparse`] with its index lists in `scratch` (no allocation once they have grown).
+pub fn solve_lower_sparse_in(l: &DMatrix<f64>, b: &mut DMatrix<f64>, scratch: &mut SparseScratch) {
     let n = l.nrows();
     assert!(l.ncols() == n && b.nrows() == n, "solve_lower_sparse: shapes");
     if l.iter().chain(b.iter()).any(|v| !v.is_finite()) {
@@ -267,11 +286,12 @@ pub fn solve_lower_sparse(l: &DMatrix<f64>, b: &mut DMatrix<f64>) {
     }
     let ld = l.as_slice();
     // Below-diagonal non-zero rows of each column of `l`.
-    let mut below: Vec<usize> = Vec::with_capacity(n * n / 2);
-    let mut start = Vec::with_capacity(n + 1);
+    let SparseScratch { below, start } = scratch;
+    below.clear();
+    start.clear();
     for k in 0..n {
         start.push(below.len());
-        below.extend((k + 1..n).filter(|&i| ld[k * n + i] != 0.0));
+        below.extend((k + 1..n).map(|i| (i, ld[k * n + i])).filter(|&(_, v)| v != 0.0));
     }
     start.push(below.len());
     for x in b.as_mut_slice().chunks_exact_mut(n.max(1)) {
@@ -281,8 +301,8 @@ pub fn solve_lower_sparse(l: &DMatrix<f64>, b: &mut DMatrix<f64>) {
             }
             let v = x[k] / ld[k * n + k];
             x[k] = v;
-            for &i in &below[start[k]..start[k + 1]] {
-                x[i] -= ld[k * n + i] * v;
+            for &(i, lik) in &below[start[k]..start[k + 1]] {
+                x[i] -= lik * v;
             }
         }
     }

@@ -80,7 +80,7 @@ fn sized(v: &mut DVector<f64>, n: usize) -> &mut DVector<f64> {
 fn zeroed_pieces(p: &mut Vec<(DMatrix<f64>, DVector<f64>)>, frames: usize, n: usize) {
     p.resize_with(frames.div_ceil(ELIMINATION_PIECE), Default::default);
     for (m, v) in p.iter_mut() {
-        shaped(m, n, n).fill(0.0);
+        shaped(m, n, n).as_mut_slice().fill(0.0);
         sized(v, n).fill(0.0);
     }
 }
@@ -137,7 +137,7 @@ impl JointProblem<'_> {
         let model = self.model_with(&state.offsets);
         let eval = Evaluator::new(&model, self.proxy);
         let Linear { c, neg_gz, frames, pieces } = out;
-        shaped(c, nz, nz).fill(0.0);
+        shaped(c, nz, nz).as_mut_slice().fill(0.0);
         sized(neg_gz, nz).fill(0.0);
         {
             let g = Globals { p: &state.poses[0], scale, offsets: &state.offsets, offset_col: cols };
@@ -190,7 +190,7 @@ impl JointProblem<'_> {
                         *v = ws.gn.g[k];
                     }
                     let b = shaped(b, nq, nz);
-                    b.fill(0.0);
+                    b.as_mut_slice().fill(0.0);
                     for (c_, &ks) in scale.iter().enumerate() {
                         for (r_, &kq) in pose.iter().enumerate() {
                             b[(r_, c_)] = h[(kq, ks)];
@@ -275,6 +275,7 @@ impl JointProblem<'_> {
             .zip(blocks.par_chunks_mut(ELIMINATION_PIECE))
             .zip(pieces.par_iter_mut())
             .for_each(|((piece, piece_blocks), (s, reduced))| {
+                let mut scratch = fixed::SparseScratch::default();
                 for (f, fb) in piece.iter().zip(piece_blocks) {
                     let nq = f.a.nrows();
                     let mut a = f.a.clone();
@@ -290,7 +291,7 @@ impl JointProblem<'_> {
                     fb.ok = true;
                     fb.l = chol.unpack();
                     shaped(&mut fb.u, nq, nz).copy_from(&f.b);
-                    fixed::solve_lower_sparse(&fb.l, &mut fb.u);
+                    fixed::solve_lower_sparse_in(&fb.l, &mut fb.u, &mut scratch);
                     sized(&mut fb.w, nq).copy_from(&f.gq);
                     fb.l.solve_lower_triangular_unchecked_mut(&mut fb.w);
                     fixed::add_t_mul_sym_sparse(s, -1.0, &fb.u);
