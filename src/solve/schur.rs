@@ -290,9 +290,9 @@ impl JointProblem<'_> {
                     };
                     fb.ok = true;
                     fb.l = chol.unpack();
-                    shaped(&mut fb.u, nq, nz).copy_from(&f.b);
+                    shaped(&mut fb.u, nq, nz).as_mut_slice().copy_from_slice(f.b.as_slice());
                     fixed::solve_lower_sparse_in(&fb.l, &mut fb.u, &mut scratch);
-                    sized(&mut fb.w, nq).copy_from(&f.gq);
+                    sized(&mut fb.w, nq).as_mut_slice().copy_from_slice(f.gq.as_slice());
                     fb.l.solve_lower_triangular_unchecked_mut(&mut fb.w);
                     fixed::add_t_mul_sym_sparse(s, -1.0, &fb.u);
 
