@@ -126,10 +126,8 @@ pub fn parse_epoch(s: &str) -> Result<u64, String> {
 /// The rotation taking the model's up direction to +z (identity when the model has none).
 pub fn world_from_model(up: Option<Vector3<f64>>) -> UnitQuaternion<f64> {
     let Some(up) = up.filter(|u| u.norm() > 0.0) else { return UnitQuaternion::identity() };
-    UnitQuaternion::rotation_between(&up, &Vector3::z()).unwrap_or_else(|| {
-        // Antiparallel: up is −z; half a turn about x.
-        UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
-    })
+    let r = crate::model::math::rotation_between(&up, &Vector3::z());
+    UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r))
 }
 
 /// A quaternion with w ≥ 0, its components on the [`TF_GRID`] (visualisation only).

@@ -62,7 +62,8 @@ pub fn generate(spec: &SyntheticSpec, root: &Path) -> anyhow::Result<()> {
                     match kind {
                         ProxyKind::Scale => {}
                         ProxyKind::Rotation => {
-                            *v = (neutral[k] + 0.01 * (TAU * (0.2 + 0.05 * (k % 7) as f64) * t).sin()).clamp(lo, hi)
+                            *v = (neutral[k] + 0.01 * crate::model::math::sin(TAU * (0.2 + 0.05 * (k % 7) as f64) * t))
+                                .clamp(lo, hi)
                         }
                         ProxyKind::Translation => *v = neutral[k],
                     }

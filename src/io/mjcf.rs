@@ -342,7 +342,7 @@ impl<'a> Builder<'a> {
                 .map(|&(n, a)| (format!("{}_{n}", s.name), Rotation, a, 0.0))
                 .collect(),
             JointType::Free => {
-                let (roll, pitch, yaw) = rot.euler_angles();
+                let (roll, pitch, yaw) = crate::model::math::euler_angles(rot.to_rotation_matrix().matrix());
                 let t = [("tx", x, pos.x), ("ty", y, pos.y), ("tz", z, pos.z)].map(|(n, a, v)| (n, Translation, a, v));
                 let r = [("rz", z, yaw), ("ry", y, pitch), ("rx", x, roll)].map(|(n, a, v)| (n, Rotation, a, v));
                 t.into_iter().chain(r).map(|(n, k, a, v)| (format!("{}_{n}", s.name), k, a, v)).collect()

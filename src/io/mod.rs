@@ -2,6 +2,7 @@
 //! `.osim` and marker sets), OpenSim tables (`.sto`/`.mot`).
 
 pub mod c3d;
+pub mod decimal;
 pub mod gltf;
 pub mod gravity;
 pub mod markers;

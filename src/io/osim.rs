@@ -398,7 +398,6 @@ fn scale_weights(axis: Vector3<f64>) -> Vector3<f64> {
 
 /// Rotation from body-fixed X-Y-Z Euler angles (Simbody `setRotationToBodyFixedXYZ`).
 fn body_fixed_xyz(o: Vector3<f64>) -> UnitQuaternion<f64> {
-    UnitQuaternion::from_axis_angle(&Vector3::x_axis(), o.x)
-        * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), o.y)
-        * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), o.z)
+    use crate::model::math::quaternion;
+    quaternion(&Vector3::x_axis(), o.x) * quaternion(&Vector3::y_axis(), o.y) * quaternion(&Vector3::z_axis(), o.z)
 }

@@ -9,6 +9,7 @@
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 
+use super::decimal::parse_f64;
 use super::markers::{per_metre, units_to_metres, MarkerTrial};
 
 /// Why a TRC file could not be read or written. `line` is 1-based.
@@ -510,7 +511,7 @@ impl Parser {
         let frame_cell = c.get(0).unwrap_or("");
         let frame = parse_frame(frame_cell).ok_or_else(|| non_numeric(1, frame_cell))?;
         let time_cell = c.get(1).unwrap_or("");
-        let time = time_cell.parse::<f64>().ok().filter(|t| t.is_finite()).ok_or_else(|| non_numeric(2, time_cell))?;
+        let time = parse_f64(time_cell).filter(|t| t.is_finite()).ok_or_else(|| non_numeric(2, time_cell))?;
         if !self.time_warned && trial.times.last().is_some_and(|&prev| time <= prev) {
             self.warnings.push(format!("time does not increase at line {line}"));
             self.time_warned = true;
@@ -523,7 +524,7 @@ impl Parser {
                 if s.is_empty() || s.eq_ignore_ascii_case("nan") {
                     continue;
                 }
-                let x = s.parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(|| non_numeric(col + 1, s))?;
+                let x = parse_f64(s).filter(|x| x.is_finite()).ok_or_else(|| non_numeric(col + 1, s))?;
                 *v = x / per_m;
             }
             if p.iter().any(|v| v.is_nan()) {

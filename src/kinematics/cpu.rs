@@ -12,7 +12,7 @@
 
 use super::Layout;
 use crate::model::{Model, MotionKind};
-use nalgebra::{DMatrix, Matrix3, Rotation3, Unit, Vector3};
+use nalgebra::{DMatrix, Matrix3, Vector3};
 
 /// Scratch for one evaluation. Create one per thread with [`Workspace::new`]; the evaluation
 /// functions never allocate.
@@ -113,7 +113,7 @@ fn forward_body(model: &Model, y: &[f64], ws: &mut Workspace, b: usize) {
         ws.motion_der[k] = der;
         match mo.kind {
             MotionKind::Rotation => {
-                r *= Rotation3::from_axis_angle(&Unit::new_unchecked(mo.axis), val).matrix();
+                r *= crate::model::math::rotation(&mo.axis, val);
             }
             MotionKind::Translation => {
                 let sigma = mo.parent_scale_weights.map_or(1.0, |w| w.dot(&s_p));

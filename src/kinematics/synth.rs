@@ -84,7 +84,7 @@ struct Wave {
 
 impl Wave {
     fn at(&self, t: f64) -> f64 {
-        let s: f64 = self.parts.iter().map(|(a, f, ph)| a * (TAU * f * t + ph).sin()).sum();
+        let s: f64 = self.parts.iter().map(|(a, f, ph)| a * crate::model::math::sin(TAU * f * t + ph)).sum();
         self.center + self.amp * s
     }
 }
@@ -199,7 +199,7 @@ pub fn synthesize_with(
             for a in 0..3 {
                 let (fq, ph) = drift[m][a];
                 let v = ws.markers[3 * m + a]
-                    + opt.drift_m * (TAU * fq * t + ph).sin()
+                    + opt.drift_m * crate::model::math::sin(TAU * fq * t + ph)
                     + opt.noise_m * normal.sample(&mut rng);
                 positions.push(if missing { f64::NAN } else { v });
             }
@@ -258,7 +258,7 @@ pub fn periodic_gait(
         .collect();
     move |t: f64, p: &mut [f64]| {
         for &(k, mid, amp, ph) in &swings {
-            p[k] = mid + amp * (TAU * freq_hz * t + ph).sin();
+            p[k] = mid + amp * crate::model::math::sin(TAU * freq_hz * t + ph);
         }
     }
 }

@@ -16,6 +16,7 @@
 
 pub mod anthropometry;
 pub mod function;
+pub mod math;
 pub mod profile;
 pub mod proxy;
 pub mod roles;

@@ -20,7 +20,7 @@ use crate::io::markers::units_to_metres;
 use crate::io::MarkerTrial;
 use crate::kinematics::cpu;
 use crate::solve::init::kabsch;
-use nalgebra::{Matrix3, Rotation3, Unit, Vector3};
+use nalgebra::{Matrix3, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// A data axis (positive direction).
@@ -310,8 +310,8 @@ fn spread(p: &[Vector3<f64>]) -> f64 {
 fn units_from_spread(ratio: f64, read_scale: f64) -> Option<Units> {
     [Units::Mm, Units::Cm, Units::M]
         .into_iter()
-        .map(|u| (u, (ratio * u.metres() / read_scale).ln().abs()))
-        .filter(|(_, d)| *d < 3f64.ln())
+        .map(|u| (u, crate::model::math::ln(ratio * u.metres() / read_scale).abs()))
+        .filter(|(_, d)| *d < crate::model::math::ln(3.0))
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .map(|(u, _)| u)
 }
@@ -320,7 +320,7 @@ fn units_from_spread(ratio: f64, read_scale: f64) -> Option<Units> {
 fn nearest_axis(u: &Vector3<f64>, tol: f64) -> Option<Vector3<f64>> {
     let u = u.try_normalize(1e-12)?;
     let (k, c) = (0..3).map(|k| (k, u[k])).max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))?;
-    (c.abs() >= tol.cos()).then(|| {
+    (c.abs() >= crate::model::math::cos(tol)).then(|| {
         let mut e = Vector3::zeros();
         e[k] = c.signum();
         e
@@ -335,10 +335,7 @@ fn axis_name(e: &Vector3<f64>) -> String {
 /// The smallest proper rotation taking unit `from` onto unit `to` (a half turn about a
 /// perpendicular axis when they are opposite).
 pub fn rotation_between(from: &Vector3<f64>, to: &Vector3<f64>) -> Rotation3<f64> {
-    Rotation3::rotation_between(from, to).unwrap_or_else(|| {
-        let helper = if from.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
-        Rotation3::from_axis_angle(&Unit::new_normalize(from.cross(&helper)), std::f64::consts::PI)
-    })
+    Rotation3::from_matrix_unchecked(crate::model::math::rotation_between(from, to))
 }
 
 /// Rotates every observed position of `trial` by `r`.

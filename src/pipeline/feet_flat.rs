@@ -124,7 +124,7 @@ pub fn level_targets(model: &Model, proxy: &ProxyMap, up: &Vector3<f64>, poses: 
                 forward(model, y, &mut ws);
                 (ws.body_rot[foot.body] * foot.forward).dot(&up)
             };
-            level.tilt_deg += pitch(&y).clamp(-1.0, 1.0).asin().to_degrees();
+            level.tilt_deg += crate::model::math::asin(pitch(&y).clamp(-1.0, 1.0)).to_degrees();
             for _ in 0..ITERATIONS {
                 let r = pitch(&y);
                 let keep = y[j];

@@ -173,7 +173,7 @@ fn range_of_motion_deg(r: &[nalgebra::Matrix3<f64>]) -> f64 {
     r.iter()
         .map(|m| {
             let c = ((first.transpose() * m).trace() - 1.0) / 2.0;
-            c.clamp(-1.0, 1.0).acos().to_degrees()
+            crate::model::math::acos(c.clamp(-1.0, 1.0)).to_degrees()
         })
         .fold(0.0, f64::max)
 }

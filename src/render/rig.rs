@@ -80,7 +80,7 @@ impl Camera {
 
     /// Vertical field of view (rad).
     pub fn yfov(&self) -> f64 {
-        2.0 * ((self.height_px as f64 / 2.0) / self.k[(1, 1)]).atan()
+        2.0 * crate::model::math::atan((self.height_px as f64 / 2.0) / self.k[(1, 1)])
     }
 
     /// Projects a `world` point (m).

@@ -42,7 +42,7 @@ impl Up {
     /// The rotation from the Z-up `world` to the exported scene's frame.
     pub fn scene_from_world(self) -> UnitQuaternion<f64> {
         match self {
-            Up::Y => UnitQuaternion::from_axis_angle(&Vector3::x_axis(), -std::f64::consts::FRAC_PI_2),
+            Up::Y => crate::model::math::quaternion(&Vector3::x_axis(), -std::f64::consts::FRAC_PI_2),
             Up::Z => UnitQuaternion::identity(),
         }
     }
@@ -271,7 +271,8 @@ fn round(
     for &(c, phi) in rings {
         for j in 0..SEGMENTS {
             let th = std::f64::consts::TAU * j as f64 / SEGMENTS as f64;
-            let n = (u * th.cos() + v * th.sin()) * phi.cos() + w * phi.sin();
+            let ((st, ct), (sp, cp)) = (crate::model::math::sin_cos(th), crate::model::math::sin_cos(phi));
+            let n = (u * ct + v * st) * cp + w * sp;
             put(c + n * r, n, &mut p);
         }
     }

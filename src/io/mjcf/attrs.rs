@@ -216,7 +216,7 @@ impl<'a> Ctx<'a> {
             Some("axisangle") => {
                 let [x, y, z, angle] = self.nums::<4>(node, a, "axisangle")?.unwrap_or_default();
                 let axis = unit(Vector3::new(x, y, z), "axisangle")?;
-                Ok(UnitQuaternion::from_axis_angle(&Unit::new_unchecked(axis), angle * self.angle))
+                Ok(crate::model::math::quaternion(&Unit::new_unchecked(axis), angle * self.angle))
             }
             Some("euler") => {
                 let e = self.nums::<3>(node, a, "euler")?.unwrap_or_default();
@@ -227,7 +227,7 @@ impl<'a> Ctx<'a> {
                         b'y' => Vector3::y_axis(),
                         _ => Vector3::z_axis(),
                     };
-                    let r = UnitQuaternion::from_axis_angle(&v, angle * self.angle);
+                    let r = crate::model::math::quaternion(&v, angle * self.angle);
                     // Rotating (lowercase) axes post-multiply, fixed (uppercase) axes pre-multiply.
                     q = if axis.is_ascii_lowercase() { q * r } else { r * q };
                 }
@@ -248,7 +248,7 @@ impl<'a> Ctx<'a> {
                 let c = Vector3::z().cross(&v);
                 let s = c.norm();
                 let axis = if s < 1e-10 { Vector3::x_axis() } else { Unit::new_unchecked(c / s) };
-                Ok(UnitQuaternion::from_axis_angle(&axis, s.atan2(v.z)))
+                Ok(crate::model::math::quaternion(&axis, crate::model::math::atan2(s, v.z)))
             }
             None => Ok(UnitQuaternion::identity()),
         }

@@ -203,7 +203,7 @@ fn joint(
             let step = match m.kind {
                 MotionKind::Rotation => Isometry3::from_parts(
                     Translation3::identity(),
-                    UnitQuaternion::from_axis_angle(&Unit::new_normalize(m.axis), v),
+                    crate::model::math::quaternion(&Unit::new_normalize(m.axis), v),
                 ),
                 MotionKind::Translation => {
                     Isometry3::from_parts((m.axis * (v * sigma)).into(), UnitQuaternion::identity())
@@ -308,11 +308,12 @@ fn offset_frame(w: &mut Writer, name: &str, parent: &str, pose: &Isometry3<f64>)
 /// Body-fixed X-Y-Z Euler angles `(a, b, c)` with `R = Rx(a) Ry(b) Rz(c)` (inverse of
 /// [`super::body_fixed_xyz`]); `c = 0` at gimbal lock.
 pub(super) fn body_fixed_xyz_angles(r: &Matrix3<f64>) -> Vector3<f64> {
-    let b = r[(0, 2)].atan2((r[(0, 0)].powi(2) + r[(0, 1)].powi(2)).sqrt());
+    use crate::model::math::atan2;
+    let b = atan2(r[(0, 2)], (r[(0, 0)].powi(2) + r[(0, 1)].powi(2)).sqrt());
     if r[(0, 0)].hypot(r[(0, 1)]) < 1e-12 {
-        return Vector3::new(r[(2, 1)].atan2(r[(1, 1)]), b, 0.0);
+        return Vector3::new(atan2(r[(2, 1)], r[(1, 1)]), b, 0.0);
     }
-    Vector3::new((-r[(1, 2)]).atan2(r[(2, 2)]), b, (-r[(0, 1)]).atan2(r[(0, 0)]))
+    Vector3::new(atan2(-r[(1, 2)], r[(2, 2)]), b, atan2(-r[(0, 1)], r[(0, 0)]))
 }
 
 /// Checks that `axes` are pairwise non-collinear and appends constant-zero axes up to three.
