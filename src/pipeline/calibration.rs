@@ -623,7 +623,11 @@ fn units_check(
         (0.001, "metres read as millimetres"),
     ]
     .iter()
-    .min_by(|a, b| (r.ln() - a.0.ln()).abs().total_cmp(&(r.ln() - b.0.ln()).abs()))
+    .min_by(|a, b| {
+        (crate::model::math::ln(r) - crate::model::math::ln(a.0))
+            .abs()
+            .total_cmp(&(crate::model::math::ln(r) - crate::model::math::ln(b.0)).abs())
+    })
     .map(|h| h.1)
     .unwrap_or("wrong units");
     Err(TrialError::Implausible {
