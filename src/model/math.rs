@@ -9,7 +9,7 @@
 //! libm) is plain IEEE arithmetic without run-time dispatch. `scripts/cpu_check.sh` converts the
 //! shared trials with glibc's variants switched and compares the bytes. Angles in radians.
 
-use nalgebra::{Matrix3, Quaternion, Rotation3, Unit, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Quaternion, Unit, UnitQuaternion, Vector3};
 
 /// `(sin x, cos x)`.
 #[inline]
@@ -78,11 +78,6 @@ pub fn rotation(axis: &Vector3<f64>, angle: f64) -> Matrix3<f64> {
     )
 }
 
-/// [`rotation`] as a `Rotation3`.
-pub fn rotation3(axis: &Unit<Vector3<f64>>, angle: f64) -> Rotation3<f64> {
-    Rotation3::from_matrix_unchecked(rotation(axis, angle))
-}
-
 /// The unit quaternion of the rotation by `angle` about the unit `axis` (as nalgebra's
 /// `UnitQuaternion::from_axis_angle`: `w = cos(θ/2)`, vector `axis · sin(θ/2)`).
 pub fn quaternion(axis: &Unit<Vector3<f64>>, angle: f64) -> UnitQuaternion<f64> {
@@ -126,6 +121,7 @@ pub fn euler_angles(r: &Matrix3<f64>) -> (f64, f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Rotation3;
 
     #[test]
     fn rotation_matches_nalgebra_to_rounding_and_quaternion_agrees() {
