@@ -294,6 +294,76 @@ fn calibration_stages_converge_in_a_few_steps_well_before_the_cap() {
     }
 }
 
+#[test]
+fn calibration_stops_within_its_tolerance_of_the_converged_subject() {
+    // A subject of the embedded synthetic archive (a static trial and two walks). The stop on the
+    // progress rate (two steps that each gained what their model predicted, progress falling
+    // fast enough that what is left is below `calibration_rel_tol`) saves registration's
+    // confirming step; the subject it stops at is the converged one to far below marker noise.
+    let dir = std::env::temp_dir().join(format!("smocap-calibration-stop-{}", std::process::id()));
+    let spec = smocap::archive::config::SyntheticSpec { subjects: 1, trials: 2, frames: 500, seed: 3 };
+    smocap::archive::synthetic::generate(&spec, &dir).expect("generates");
+    let files = SubjectFiles { static_trial: Some(dir.join("subj01/static.trc")), ..Default::default() };
+    let sub = prepare_subject(&files).expect("subject");
+    let read = |n: &str| read_trial(&sub.ctx, &dir.join("subj01").join(n), &InputOptions::default()).expect("reads").0;
+    let (st, w1, w2) = (read("static.trc"), read("walk01.trc"), read("walk02.trc"));
+    let calibrate = |ctx: &Context| {
+        calibrate_placed_with(ctx, &[("static", &st)], &[("walk01", &w1), ("walk02", &w2)]).expect("calibrates").0
+    };
+    let cal = calibrate(&sub.ctx);
+    let mut tight = sub.ctx.clone();
+    tight.settings.calibration_rel_tol = 1e-12;
+    let converged = calibrate(&tight);
+    std::fs::remove_dir_all(&dir).ok();
+    let kept =
+        |c: &Calibration| c.stages.iter().filter(|s| s.stage == "registration").map(|s| s.iterations).sum::<u32>();
+    eprintln!("registration: {} kept steps, {} to convergence", kept(&cal), kept(&converged));
+    assert!(kept(&cal) < kept(&converged), "{} kept steps, {} to convergence", kept(&cal), kept(&converged));
+    let ctx = &sub.ctx;
+    let scales = |c: &Calibration| -> Vec<f64> {
+        (0..ctx.proxy.np()).filter(|&k| ctx.proxy.proxies[k].kind == ProxyKind::Scale).map(|k| c.proxies[k]).collect()
+    };
+    let worst = scales(&cal).iter().zip(scales(&converged)).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    let offsets = cal.marker_offsets.as_ref().zip(converged.marker_offsets.as_ref()).expect("registered");
+    let moved = offsets.0.iter().zip(offsets.1).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+    eprintln!("largest difference: scale {worst:.2e}, offset {:.4} mm", moved * 1e3);
+    assert!(worst < 1e-4, "a scale factor {worst:.2e} from the converged one");
+    assert!(moved < 1e-4, "an offset {:.4} mm from the converged one", moved * 1e3);
+    assert!((cal.rmse_m - converged.rmse_m).abs() < 1e-6, "RMSE {} against {} m", cal.rmse_m, converged.rmse_m);
+}
+
+#[test]
+fn a_thread_calibrating_again_in_its_kept_buffers_gets_the_same_bits() {
+    // The joint solve keeps its buffers per thread between calibrations (other subjects, other
+    // shapes): what they held must not reach a result.
+    let ctx = Context::shipped().expect("shipped");
+    let subject = |seed: u64, frames: usize| {
+        let opt = SynthOptions { frames, seed, noise_m: 0.001, ..SynthOptions::default() };
+        synthesize(&ctx.model, &ctx.proxy, &opt).trial
+    };
+    let (a, b) = (subject(21, 300), subject(22, 200));
+    let fresh = std::thread::scope(|s| s.spawn(|| calibrate_subject(&ctx, &[("b", &b)]).expect("b")).join().unwrap());
+    let again = std::thread::scope(|s| {
+        s.spawn(|| {
+            calibrate_subject(&ctx, &[("a", &a)]).expect("a");
+            calibrate_subject(&ctx, &[("b", &b)]).expect("b")
+        })
+        .join()
+        .unwrap()
+    });
+    let bits = |c: &Calibration| -> Vec<u64> {
+        let offsets = c.marker_offsets.iter().flatten().flat_map(|o| o.iter().copied());
+        c.proxies
+            .iter()
+            .copied()
+            .chain(offsets)
+            .chain(c.frame_proxies.iter().flatten().copied())
+            .map(f64::to_bits)
+            .collect()
+    };
+    assert_eq!(bits(&fresh), bits(&again), "a calibration after another one differs");
+}
+
 /// CMU's names for the Plug-in Gait markers the shipped model has.
 const CMU: &[(&str, &str)] = &[
     ("LASI", "LFWT"),

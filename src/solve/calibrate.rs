@@ -25,7 +25,7 @@ use super::fixed;
 use super::init::multi_start;
 use super::prior::{GlobalTerm, Globals};
 use super::qp::{BoxQp, ClarabelQp, LinearConstraints, QpProblem, QpSolver};
-use super::schur::{Eliminated, Linear};
+use super::schur::JointScratch;
 use super::settings::SolverSettings;
 use super::trqp::FrameSolver;
 use crate::kinematics::assembly::{EvalWorkspace, Evaluator, FrameProblem};
@@ -271,6 +271,11 @@ impl JointProblem<'_> {
 
     /// Levenberg–Marquardt on all unknowns, the poses eliminated by their Schur complement.
     pub fn solve(&self, state: &mut JointState) -> JointOutcome {
+        JointScratch::with(|scratch| self.solve_in(state, scratch))
+    }
+
+    /// [`JointProblem::solve`] in `scratch`'s buffers.
+    fn solve_in(&self, state: &mut JointState, scratch: &mut JointScratch) -> JointOutcome {
         let s = self.settings;
         let (scale, pose) = self.scale_indices();
         let ns = scale.len();
@@ -287,20 +292,23 @@ impl JointProblem<'_> {
         // The cap counts kept steps (a run of rejected ones ends when the damping passes 1e8).
         let gain_ratio = s.calibration_gain_ratio;
         // The linearisation at the current state, kept across rejected steps.
-        let mut linear = Linear::default();
+        let JointScratch { linear, elim } = scratch;
         let mut fresh = false;
-        let mut elim = Eliminated::default();
+        let mut boxqp = BoxQp::new();
+        // The relative progress of the step before, when its model predicted it (else 0).
+        let mut rel_before = 0.0f64;
         while iterations - rejected < s.calibration_max_iterations && !self.frames.is_empty() {
             iterations += 1;
             if !fresh {
-                self.linearize(state, (&scale, &pose), &cols, nz, &mut linear);
+                self.linearize(state, (&scale, &pose), &cols, nz, linear);
                 fresh = true;
             }
-            let lin = &linear;
-            let (mut schur, reduced) = self.eliminate(lin, lambda, &mut elim);
+            let lin = &*linear;
+            self.eliminate(lin, lambda, elim);
+            let schur = &mut elim.schur;
             let neg_gz = &lin.neg_gz;
             // `rhs` is −g_z plus the poses' elimination, Σ Uᵀw.
-            let rhs = neg_gz + reduced;
+            let rhs = neg_gz + &elim.reduced;
             let damping_z = DVector::from_fn(nz, |d, _| lambda * schur[(d, d)].max(s.damping_floor));
             for d in 0..nz {
                 schur[(d, d)] += damping_z[d];
@@ -322,7 +330,7 @@ impl JointProblem<'_> {
                 }
             }
             let neg_rhs = -&rhs;
-            let problem = QpProblem { h: &schur, g: &neg_rhs, lb: &lb, ub: &ub };
+            let problem = QpProblem { h: schur, g: &neg_rhs, lb: &lb, ub: &ub };
             let mut dz = DVector::zeros(nz);
             let solved = match scale_constraints(self.proxy, &scale, p_now) {
                 Some(mut c) => {
@@ -334,7 +342,7 @@ impl JointProblem<'_> {
                     qp.set_constraints(Some(c));
                     qp.solve(&problem, &mut dz)
                 }
-                None => BoxQp::new().solve(&problem, &mut dz),
+                None => boxqp.solve(&problem, &mut dz),
             };
             if solved.is_err() {
                 break;
@@ -387,6 +395,18 @@ impl JointProblem<'_> {
                 if rel < s.calibration_rel_tol || dz.amax() < 1e-5 {
                     break;
                 }
+                // Or what is left to gain is below the tolerance: after two steps in a row that
+                // each gained what their model predicted (within 10 %), progress falling by
+                // `r = rel / rel_before` per step leaves about `rel · r / (1 − r)` (docs/CALIBRATION.md,
+                // "The solver").
+                let as_predicted = predicted > 0.0 && ((energy_before - e1) / predicted - 1.0).abs() <= 0.1;
+                if as_predicted && rel_before > 0.0 {
+                    let r = rel / rel_before;
+                    if r < 1.0 && rel * r / (1.0 - r) < s.calibration_rel_tol {
+                        break;
+                    }
+                }
+                rel_before = if as_predicted { rel } else { 0.0 };
             } else if predicted < s.calibration_rel_tol * energy || dz.amax() < 1e-4 {
                 // Rejected, and the model itself sees less to gain than the tolerance, or the step
                 // moves no scale factor or offset by 1e-4 (0.1 mm on a metre, below any marker
@@ -395,6 +415,7 @@ impl JointProblem<'_> {
                 break;
             } else {
                 rejected += 1;
+                rel_before = 0.0;
                 if gain_ratio {
                     lambda *= nu;
                     nu *= 2.0;

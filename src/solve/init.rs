@@ -139,7 +139,8 @@ pub fn sweep(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mut [f6
 /// the neutral pose with root placement and sweeps ([`cold_start`]), the neutral pose with the
 /// root placed only, and the calibration pose with the root placed. Distal chains with few markers
 /// (forearm pronation against humeral rotation) have local minima that a single start can land in,
-/// and a walk tracked from a wrong first frame stays in the wrong basin. Builds the sweeps'
+/// and a walk tracked from a wrong first frame stays in the wrong basin (two starts when the pose
+/// given is the calibration pose: the last two would be one). Builds the sweeps
 /// scratch: see [`multi_start_with`].
 pub fn multi_start(
     solver: &mut FrameSolver<'_>,
@@ -165,6 +166,10 @@ pub fn multi_start_with(
     place_root(solver, frame, &mut placed);
     let mut best: Option<(super::FrameStats, Vec<f64>)> = None;
     for start in 0..3 {
+        // From `calibrated` itself (a tracker's first frame), the third start is the second.
+        if start == 2 && p == calibrated {
+            break;
+        }
         let mut trial = if start == 2 { calibrated.to_vec() } else { placed.clone() };
         match start {
             0 => sweeps(cold, solver, frame, &mut trial),

@@ -58,22 +58,81 @@ pub(super) struct Linear {
 pub(super) struct Eliminated {
     pub(super) blocks: Vec<FrameBlocks>,
     pieces: Vec<(DMatrix<f64>, DVector<f64>)>,
+    /// The reduced system `S = C − Σ_k UᵀU` (undamped) and `Σ_k Uᵀw`.
+    pub(super) schur: DMatrix<f64>,
+    pub(super) reduced: DVector<f64>,
 }
 
-/// `m` resized to `r × c` (left as is, contents and all, when it already has that shape).
+/// `m` resized to `r × c`, its contents unspecified (callers overwrite every entry). Its
+/// allocation is kept when large enough, so that a buffer reused across stages and subjects of
+/// other shapes touches no fresh pages ([`JointScratch`]).
 fn shaped(m: &mut DMatrix<f64>, r: usize, c: usize) -> &mut DMatrix<f64> {
     if m.shape() != (r, c) {
-        *m = DMatrix::zeros(r, c);
+        let mut v: Vec<f64> = std::mem::replace(m, DMatrix::zeros(0, 0)).data.into();
+        v.resize(r * c, 0.0);
+        *m = DMatrix::from_vec(r, c, v);
     }
     m
 }
 
-/// `v` resized to `n` (left as is when it already has that length).
+/// `v` resized to `n`, its contents unspecified, its allocation kept as in [`shaped`].
 fn sized(v: &mut DVector<f64>, n: usize) -> &mut DVector<f64> {
     if v.len() != n {
-        *v = DVector::zeros(n);
+        let mut d: Vec<f64> = std::mem::replace(v, DVector::zeros(0)).data.into();
+        d.resize(n, 0.0);
+        *v = DVector::from_vec(d);
     }
     v
+}
+
+/// The joint solve's buffers ([`Linear`], [`Eliminated`]): a few megabytes per calibration
+/// (each frame's `B` and `U`, `frames × poses × (scales + 3 × markers)` values, and the pieces'
+/// reduced systems). Kept per thread between calibrations, so that each subject after the first
+/// writes into pages already mapped instead of faulting in fresh zeroed ones (about 10 % of the
+/// joint stages' time on the synthetic archive, docs/CALIBRATION.md, "Cost").
+#[derive(Default)]
+pub(super) struct JointScratch {
+    pub(super) linear: Linear,
+    pub(super) elim: Eliminated,
+}
+
+/// Largest scratch kept for the next calibration on a thread (bytes); a larger one (a calibration
+/// on thousands of frames) is freed.
+const SCRATCH_KEPT_BYTES: usize = 64 << 20;
+
+impl JointScratch {
+    /// Bytes held by the buffers.
+    fn bytes(&self) -> usize {
+        let m = |m: &DMatrix<f64>| m.len();
+        let v = |v: &DVector<f64>| v.len();
+        let pieces = |p: &[(DMatrix<f64>, DVector<f64>)]| p.iter().map(|(a, b)| m(a) + v(b)).sum::<usize>();
+        let l = &self.linear;
+        let e = &self.elim;
+        let values = m(&l.c)
+            + v(&l.neg_gz)
+            + l.frames.iter().map(|f| m(&f.a) + v(&f.gq) + m(&f.b)).sum::<usize>()
+            + pieces(&l.pieces)
+            + e.blocks.iter().map(|b| m(&b.l) + m(&b.u) + v(&b.w) + v(&b.damping)).sum::<usize>()
+            + pieces(&e.pieces)
+            + m(&e.schur)
+            + v(&e.reduced);
+        values * std::mem::size_of::<f64>()
+    }
+
+    /// Runs `f` with this thread's kept scratch (a fresh one when none is kept, or when a
+    /// calibration nested on this thread holds it), and keeps it afterwards unless it grew past
+    /// [`SCRATCH_KEPT_BYTES`]. Results do not depend on what the buffers held.
+    pub(super) fn with<R>(f: impl FnOnce(&mut JointScratch) -> R) -> R {
+        thread_local! {
+            static KEPT: std::cell::Cell<Option<Box<JointScratch>>> = const { std::cell::Cell::new(None) };
+        }
+        let mut scratch = KEPT.with(|k| k.take()).unwrap_or_default();
+        let out = f(&mut scratch);
+        if scratch.bytes() <= SCRATCH_KEPT_BYTES {
+            KEPT.with(|k| k.set(Some(scratch)));
+        }
+        out
+    }
 }
 
 /// Piece buffers: one `(n × n, n)` pair per piece of `frames` frames, zeroed.
@@ -259,15 +318,15 @@ impl JointProblem<'_> {
     }
 
     /// Eliminates every frame's poses at damping `lambda`: the reduced system
-    /// `S = C − Σ_k UᵀU` (undamped in `z`) and `Σ_k Uᵀw`, each frame's blocks into `out` (its
-    /// buffers reused; `ok` false where the damped pose block is not positive definite). Frames
-    /// are eliminated in pieces of [`ELIMINATION_PIECE`] in parallel, the pieces' sums added in
-    /// order.
-    pub(super) fn eliminate(&self, lin: &Linear, lambda: f64, out: &mut Eliminated) -> (DMatrix<f64>, DVector<f64>) {
+    /// `S = C − Σ_k UᵀU` (undamped in `z`) and `Σ_k Uᵀw` into `out.schur` and `out.reduced`, each
+    /// frame's blocks into `out.blocks` (buffers reused; `ok` false where the damped pose block is
+    /// not positive definite). Frames are eliminated in pieces of [`ELIMINATION_PIECE`] in
+    /// parallel, the pieces' sums added in order.
+    pub(super) fn eliminate(&self, lin: &Linear, lambda: f64, out: &mut Eliminated) {
         use rayon::prelude::*;
         let nz = lin.c.nrows();
         let floor = self.settings.damping_floor;
-        let Eliminated { blocks, pieces } = out;
+        let Eliminated { blocks, pieces, schur, reduced } = out;
         blocks.resize_with(lin.frames.len(), Default::default);
         zeroed_pieces(pieces, lin.frames.len(), nz);
         lin.frames
@@ -299,12 +358,11 @@ impl JointProblem<'_> {
                     *reduced += fixed::t_mul_v(&fb.u, &fb.w);
                 }
             });
-        let mut schur = lin.c.clone();
-        let mut reduced = DVector::<f64>::zeros(nz);
+        shaped(schur, nz, nz).copy_from(&lin.c);
+        sized(reduced, nz).fill(0.0);
         for (s, r) in pieces.iter() {
-            schur += s;
-            reduced += r;
+            *schur += s;
+            *reduced += r;
         }
-        (schur, reduced)
     }
 }

@@ -132,9 +132,10 @@ pub struct SolverSettings {
     /// subjects in 3–5 steps, the OpenCap subject in 5–20). Default 50.
     pub calibration_max_iterations: u32,
     /// Calibration stops on the objective's relative progress: when an accepted step lowers it
-    /// by less than this fraction, or when a rejected step's damped model predicts less than
-    /// this fraction to gain (or when a kept step moves no scale factor or offset by 1e-5, a
-    /// rejected one by 1e-4). Default 1e-5: the
+    /// by less than this fraction, when two accepted steps in a row, each as its model predicted,
+    /// leave less than this fraction to gain at their rate of progress, or when a rejected step's
+    /// damped model predicts less than this fraction to gain (or when a kept step moves no scale
+    /// factor or offset by 1e-5, a rejected one by 1e-4). Default 1e-5: the
     /// OpenCap subject's figures are those of 1e-6 to the reported digits (docs/CALIBRATION.md,
     /// "Cost") in half the time; the scales then move by far less than their uncertainty.
     pub calibration_rel_tol: f64,
