@@ -14,7 +14,7 @@
 
 use super::calibration_frames::{choose, TrialScan};
 use super::frames::TrialFrames;
-use super::trial::{match_markers, no_match, observations, TrialError};
+use super::trial::{match_markers, no_match, observation_row, TrialError};
 use super::Context;
 use crate::io::MarkerTrial;
 use crate::kinematics::assembly::FrameProblem;
@@ -330,25 +330,31 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
         let template = FrameProblem { observed: &[], marker_weights: w1, tracking_ref, tracking_weights };
         let mut tracker = Tracker::new(&mut solver, &p0);
         let mut next = chosen.iter().copied().peekable();
+        // A trial held whole is read in place (its window of every frame is not a copy) and only
+        // the tracked frames' observations are gathered; one read from its file, a window at a
+        // time up to its last chosen frame.
+        let whole = t.window_frames() == usize::MAX;
+        let mut row = vec![f64::NAN; stride];
         let mut a = begin;
         while a <= last {
-            let b = a.saturating_add(t.window_frames().max(1)).min(last + 1);
-            let w = t.window(a..b).map_err(read)?;
-            let o = observations(&w, map);
-            for (i, row) in o.chunks_exact(stride).enumerate() {
-                let is_chosen = next.peek() == Some(&(a + i));
-                if !is_chosen && (a + i - begin) % step != 0 {
+            let (w0, b) =
+                if whole { (0, last + 1) } else { (a, a.saturating_add(t.window_frames().max(1)).min(last + 1)) };
+            let w = t.window(w0..if whole { t.header().n_frames() } else { b }).map_err(read)?;
+            for f in a..b {
+                let is_chosen = next.peek() == Some(&f);
+                if !is_chosen && (f - begin) % step != 0 {
                     continue;
                 }
+                observation_row(&w, map, f - w0, &mut row);
                 // Frames between calibration frames only carry the pose forward: a few
                 // iterations (`calibration_track_iterations`) rather than convergence.
                 let cap = settings.calibration_track_iterations;
                 let iterations = if is_chosen || cap == 0 { settings.max_iterations } else { cap };
-                let p = tracker.step_limited(&mut solver, row, &template, iterations);
+                let p = tracker.step_limited(&mut solver, &row, &template, iterations);
                 tracked += 1;
                 if is_chosen {
                     next.next();
-                    pooled.extend_from_slice(row);
+                    pooled.extend_from_slice(&row);
                     starts.push(p.to_vec());
                     kinds.push(kind);
                     trial_of.push(input);

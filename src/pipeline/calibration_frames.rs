@@ -8,7 +8,7 @@
 //! two frames differ by the RMS distance of those markers.
 
 use super::frames::{for_each_window, TrialFrames};
-use super::trial::observations;
+use super::trial::observation_row;
 use nalgebra::{Matrix3, Vector3};
 
 /// Markers observed in a frame that the solver uses (weight > 0).
@@ -43,12 +43,13 @@ impl TrialScan {
         let n = t.header().n_frames();
         let every = (n / 20).max(1);
         let (mut counts, mut sample) = (Vec::with_capacity(n), Vec::new());
+        let mut row = vec![f64::NAN; stride];
         for_each_window(t, |first, w| {
-            let o = observations(w, map);
-            for (f, row) in o.chunks_exact(stride).enumerate() {
-                counts.push(observed_count(row, weights));
+            for f in 0..w.n_frames() {
+                observation_row(w, map, f, &mut row);
+                counts.push(observed_count(&row, weights));
                 if (first + f) % every == 0 {
-                    sample.extend_from_slice(row);
+                    sample.extend_from_slice(&row);
                 }
             }
         })?;
@@ -65,11 +66,11 @@ impl TrialScan {
             kept.reserve(candidates.len() * stride);
             let mut next = candidates.iter().copied().peekable();
             for_each_window(t, |first, w| {
-                let o = observations(w, map);
-                for (f, row) in o.chunks_exact(stride).enumerate() {
+                for f in 0..w.n_frames() {
                     if next.peek() == Some(&(first + f)) {
                         next.next();
-                        kept.extend_from_slice(row);
+                        observation_row(w, map, f, &mut row);
+                        kept.extend_from_slice(&row);
                     }
                 }
             })?;

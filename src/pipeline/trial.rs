@@ -143,16 +143,23 @@ impl GapRuns {
 
 /// Observations in model-marker order, frame-major (`frame · 3M + 3·marker + axis`), NaN gaps.
 pub fn observations(trial: &MarkerTrial, map: &[Option<usize>]) -> Vec<f64> {
-    let nm = map.len();
-    let mut out = vec![f64::NAN; trial.n_frames() * nm * 3];
-    for f in 0..trial.n_frames() {
-        for (m, col) in map.iter().enumerate() {
-            if let Some(p) = col.and_then(|c| trial.position(f, c)) {
-                out[(f * nm + m) * 3..(f * nm + m) * 3 + 3].copy_from_slice(&p);
-            }
-        }
+    let stride = 3 * map.len();
+    let mut out = vec![f64::NAN; trial.n_frames() * stride];
+    for (f, row) in out.chunks_exact_mut(stride.max(1)).enumerate() {
+        observation_row(trial, map, f, row);
     }
     out
+}
+
+/// Frame `f`'s observations in model-marker order (`3·marker + axis`) into `row`, NaN gaps: one
+/// row of [`observations`] without building the others.
+pub fn observation_row(trial: &MarkerTrial, map: &[Option<usize>], f: usize, row: &mut [f64]) {
+    for (col, o) in map.iter().zip(row.chunks_exact_mut(3)) {
+        match col.and_then(|c| trial.position(f, c)) {
+            Some(p) => o.copy_from_slice(&p),
+            None => o.fill(f64::NAN),
+        }
+    }
 }
 
 pub(crate) fn no_match(ctx: &Context, name: &str, trial: &MarkerTrial) -> TrialError {
