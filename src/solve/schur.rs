@@ -101,10 +101,10 @@ pub(super) struct JointScratch {
 const SCRATCH_KEPT_BYTES: usize = 64 << 20;
 
 impl JointScratch {
-    /// Bytes held by the buffers.
+    /// Bytes held by the buffers (their allocations, which a reshape keeps).
     fn bytes(&self) -> usize {
-        let m = |m: &DMatrix<f64>| m.len();
-        let v = |v: &DVector<f64>| v.len();
+        let m = |m: &DMatrix<f64>| m.data.as_vec().capacity();
+        let v = |v: &DVector<f64>| v.data.as_vec().capacity();
         let pieces = |p: &[(DMatrix<f64>, DVector<f64>)]| p.iter().map(|(a, b)| m(a) + v(b)).sum::<usize>();
         let l = &self.linear;
         let e = &self.elim;
@@ -364,5 +364,41 @@ impl JointProblem<'_> {
             *schur += s;
             *reduced += r;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_reshaped_buffer_keeps_its_allocation() {
+        // Registration's `B` (poses × (scales + 3 × markers)) after the scale stage's narrower one.
+        let mut m = DMatrix::<f64>::zeros(30, 175);
+        let at = m.as_ptr();
+        shaped(&mut m, 30, 16);
+        assert_eq!(m.shape(), (30, 16));
+        shaped(&mut m, 30, 175).fill(1.0);
+        assert_eq!((m.shape(), m.as_ptr()), ((30, 175), at));
+        let mut v = DVector::<f64>::zeros(175);
+        let at = v.as_ptr();
+        sized(&mut v, 16);
+        sized(&mut v, 175);
+        assert_eq!((v.len(), v.as_ptr()), (175, at));
+    }
+
+    #[test]
+    fn a_thread_keeps_its_joint_buffers_up_to_the_limit() {
+        std::thread::spawn(|| {
+            let at = JointScratch::with(|s| shaped(&mut s.elim.schur, 175, 175).as_ptr());
+            assert_eq!(JointScratch::with(|s| s.elim.schur.as_ptr()), at, "not kept");
+            // A scratch past the limit (a calibration on thousands of frames) is freed.
+            JointScratch::with(|s| {
+                shaped(&mut s.elim.schur, 3000, 3000);
+            });
+            assert_eq!(JointScratch::with(|s| s.elim.schur.len()), 0, "kept past the limit");
+        })
+        .join()
+        .unwrap();
     }
 }
