@@ -140,7 +140,7 @@ pub fn sweep(solver: &mut FrameSolver<'_>, frame: &FrameProblem<'_>, p: &mut [f6
 /// root placed only, and the calibration pose with the root placed. Distal chains with few markers
 /// (forearm pronation against humeral rotation) have local minima that a single start can land in,
 /// and a walk tracked from a wrong first frame stays in the wrong basin (two starts when the pose
-/// given is the calibration pose: the last two would be one). Builds the sweeps
+/// given is the calibration pose: the last two would be one). Builds the sweeps'
 /// scratch: see [`multi_start_with`].
 pub fn multi_start(
     solver: &mut FrameSolver<'_>,
