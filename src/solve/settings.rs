@@ -129,7 +129,7 @@ pub struct SolverSettings {
     /// Cap on the accepted Levenberg–Marquardt steps of each stage of the multi-frame
     /// calibration (rejected steps are not counted: a run of them ends when the damping passes
     /// 1e8). A safety net: stages stop on `calibration_rel_tol` (the shipped model's synthetic
-    /// subjects in 3–5 steps, the OpenCap subject in 5–20). Default 50.
+    /// subjects in 2–4 steps, the OpenCap subject in 5–20). Default 50.
     pub calibration_max_iterations: u32,
     /// Calibration stops on the objective's relative progress: when an accepted step lowers it
     /// by less than this fraction, when two accepted steps in a row, each as its model predicted,
