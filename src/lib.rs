@@ -4,9 +4,11 @@
 //! Data flows through the modules in this order: [`io`] (marker files, model files) →
 //! [`model`] (immutable tree, scales, markers, proxy map) → [`kinematics`] (forward kinematics,
 //! Jacobians, Gauss–Newton assembly) → [`solve`] (trust-region QP, QP backends, calibration) →
-//! [`pipeline`] (trials, reports) → [`archive`] (whole datasets to MCAP) → [`render`] (glTF scenes,
-//! cameras, 2D ground truth, previews) → the `smocap` command line;
-//! [`eval`] holds the evaluation studies built on the pipeline.
+//! [`pipeline`] (input, calibration, running, results) → [`archive`] (whole datasets to MCAP) →
+//! [`retarget`] (humanoid robots), [`render`] (glTF scenes, cameras, 2D ground truth, previews)
+//! and [`eval`] (the evaluation studies) → the `smocap` command line. A module imports only from
+//! the layers before it (`docs/ARCHITECTURE.md`, checked by `tests/architecture.rs`); `io` reads
+//! files into [`model`]'s types, so [`model`] sits below it.
 
 pub mod archive;
 pub mod cli;
@@ -16,4 +18,5 @@ pub mod kinematics;
 pub mod model;
 pub mod pipeline;
 pub mod render;
+pub mod retarget;
 pub mod solve;
