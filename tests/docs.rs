@@ -72,7 +72,12 @@ fn blocks(file: &str, text: &str) -> Vec<Block> {
             Some((start, info, ticks, body)) => {
                 let n = t.chars().take_while(|&c| c == '`').count();
                 if n >= *ticks && t[n..].trim().is_empty() {
-                    out.push(Block { file: file.to_string(), line: *start, info: info.clone(), text: body.join("\n") + "\n" });
+                    out.push(Block {
+                        file: file.to_string(),
+                        line: *start,
+                        info: info.clone(),
+                        text: body.join("\n") + "\n",
+                    });
                     open = None;
                 } else {
                     body.push(line);
@@ -101,7 +106,10 @@ fn pages() -> Vec<(String, String)> {
         .unwrap_or_default();
     guide.sort();
     names.extend(guide);
-    names.into_iter().map(|n| (n.clone(), std::fs::read_to_string(repo.join(&n)).unwrap_or_else(|e| panic!("{n}: {e}")))).collect()
+    names
+        .into_iter()
+        .map(|n| (n.clone(), std::fs::read_to_string(repo.join(&n)).unwrap_or_else(|e| panic!("{n}: {e}"))))
+        .collect()
 }
 
 fn shared_datasets() -> PathBuf {
@@ -171,7 +179,13 @@ fn every_runnable_command_in_the_docs_runs() {
                 .output()
                 .expect("run bash");
             ran += 1;
-            println!("docs: {}:{}: exit {:?} in {:.1} s", b.file, b.line, o.status.code(), start.elapsed().as_secs_f64());
+            println!(
+                "docs: {}:{}: exit {:?} in {:.1} s",
+                b.file,
+                b.line,
+                o.status.code(),
+                start.elapsed().as_secs_f64()
+            );
             if !o.status.success() {
                 failures.push(format!(
                     "{}:{}: exit {:?}\n--- block\n{}--- stdout\n{}--- stderr\n{}",
@@ -264,7 +278,11 @@ fn every_flag_the_docs_pass_to_smocap_exists() {
             }
         }
     }
-    assert!(wrong.is_empty(), "flags the docs use that smocap does not have:\n{}", wrong.into_iter().collect::<Vec<_>>().join("\n"));
+    assert!(
+        wrong.is_empty(),
+        "flags the docs use that smocap does not have:\n{}",
+        wrong.into_iter().collect::<Vec<_>>().join("\n")
+    );
 }
 
 /// Paths quoted in backticks in `text` below the repository's source folders that do not exist
@@ -321,10 +339,10 @@ fn runnable_blocks_are_found_with_their_lines() {
     assert!(b[0].is("sh run") && b[0].line == 3 && b[0].text == "smocap demo --frames 10\n");
     assert!(b[1].is("sh") && !b[1].is("sh run") && b[1].line == 7);
     assert!(b[2].is("python run"));
-    assert_eq!(smocap_calls("x=1; smocap solve a.trc --mot-dir out \\\n  --scaled-model=o.osim | head # --no"), vec![(
-        "solve".to_string(),
-        vec!["--mot-dir".to_string(), "--scaled-model".to_string()]
-    )]);
+    assert_eq!(
+        smocap_calls("x=1; smocap solve a.trc --mot-dir out \\\n  --scaled-model=o.osim | head # --no"),
+        vec![("solve".to_string(), vec!["--mot-dir".to_string(), "--scaled-model".to_string()])]
+    );
 }
 
 /// Pages linked from the docs that another piece of work adds; a link to one of them is not
@@ -367,7 +385,11 @@ fn every_link_in_the_docs_points_at_a_file() {
     let broken: Vec<String> = pages().iter().flat_map(|(f, t)| broken_links(f, t, root)).collect();
     assert!(broken.is_empty(), "links to files that do not exist:\n{}", broken.join("\n"));
     assert_eq!(
-        broken_links("docs/guide/x.md", "[a](../preview.png) [b](../../README.md#x) [c](nope.md) [d](https://x.org/y)", root),
+        broken_links(
+            "docs/guide/x.md",
+            "[a](../preview.png) [b](../../README.md#x) [c](nope.md) [d](https://x.org/y)",
+            root
+        ),
         vec!["docs/guide/x.md: (nope.md)"]
     );
 }
