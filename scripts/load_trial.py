@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""Loads a trial converted by `smocap convert` into NumPy / pandas (the README's recipe), with the
-smocap Python package (`smocap.read_trial`).
+"""Loads a trial converted by `smocap convert` into NumPy / pandas (the recipe of
+docs/guide/python.md), with the smocap Python package (`smocap.read_trial`).
 
     pip install .                                  # at the repository root, in a virtual env
     python3 scripts/load_trial.py smocap-out/synthetic/subj01/walk01.mcap

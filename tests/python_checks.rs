@@ -2,8 +2,8 @@
 //! readers and `mcap-protobuf-support` decode every message of every channel from the file's own
 //! descriptors; Foxglove's messages match `foxglove-schemas-protobuf` field by field; every
 //! `/tf` is one tree rooted at `world`) on the synthetic archive and both shared OpenSim
-//! datasets. (The README's NumPy/pandas recipe, `scripts/load_trial.py` on the smocap Python
-//! package, is tested by `python/tests/test_load_trial.py`.)
+//! datasets. (The NumPy/pandas recipe of docs/guide/python.md, `scripts/load_trial.py` on the
+//! smocap Python package, is tested by `python/tests/test_load_trial.py`.)
 //!
 //! They run with the Python named by `SMOCAP_PYTHON` (`.ci/run` makes a venv with the pinned
 //! packages); without it each test prints a note and passes.

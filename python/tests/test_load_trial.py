@@ -1,5 +1,5 @@
-"""scripts/load_trial.py (the README's recipe for converted trials) against `smocap export --csv`:
-every coordinate of every frame, the times and the marker RMSE agree."""
+"""scripts/load_trial.py (docs/guide/python.md's recipe for converted trials) against
+`smocap export --csv`: every coordinate of every frame, the times and the marker RMSE agree."""
 
 import csv
 import runpy

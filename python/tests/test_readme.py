@@ -11,8 +11,7 @@ from conftest import GAIT, REPO
 
 def readme_example():
     text = (REPO / "README.md").read_text()
-    section = text[text.index("## From Python: `pip install .`") :]
-    return re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    return re.search(r"^```python run\n(.*?)^```", text, re.S | re.M).group(1)
 
 
 def test_the_readme_example_calibrates_solves_and_plots_knee_flexion(monkeypatch):
