@@ -12,7 +12,7 @@ pub struct ProjectArgs {
     /// file, `--out/<file stem>` for several).
     #[arg(required_unless_present = "points")]
     pub files: Vec<PathBuf>,
-    /// Camera rig (TOML: the README's "Into rendering pipelines"); default: the built-in
+    /// Camera rig (TOML: docs/guide/rendering-and-synthetic-video.md); default: the built-in
     /// two-camera rig (frontal and sagittal) around each trial.
     #[arg(long)]
     pub cameras: Option<PathBuf>,
