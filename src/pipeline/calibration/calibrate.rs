@@ -121,10 +121,8 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
             })
             .collect()
     };
-    let all_w = |k: Kind| if k == Kind::Static { &ctx.calibration_weights } else { &ctx.marker_weights };
-    let first_static = first(all_w(Kind::Static));
-    let first_motion = first(all_w(Kind::Motion));
-    let first_w = |k: Kind| if k == Kind::Static { &first_static } else { &first_motion };
+    let first_static = first(&ctx.calibration_weights);
+    let first_motion = first(&ctx.marker_weights);
     let (coord_ref, coord_w) = ctx.coordinate_tracking();
     // Static frames: the coordinate targets plus the known standing posture.
     let mut posture = StaticPosture::neutral(
@@ -138,10 +136,12 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
         posture.hold_arms(&ctx.model, sd, settings.prior_noise_sd_m, &ctx.static_posture_values);
     }
     let (static_ref, static_w) = posture.fold(&coord_ref, &coord_w);
-    let tracking_of = |k: Kind| match k {
-        Kind::Static => (static_ref.as_slice(), static_w.as_slice()),
-        Kind::Motion => (coord_ref.as_slice(), coord_w.as_slice()),
+    let weights = FrameWeights {
+        all: [&ctx.calibration_weights, &ctx.marker_weights],
+        first: [&first_static, &first_motion],
+        tracking: [(&static_ref, &static_w), (&coord_ref, &coord_w)],
     };
+    let (first_w, all_w, tracking_of) = (|k| weights.first(k), |k| weights.all(k), |k| weights.tracking(k));
     let mut solver = FrameSolver::new(&eval, settings.clone(), make_qp(settings.qp));
     let np = ctx.proxy.np();
     let scale: Vec<usize> = (0..np).filter(|&k| ctx.proxy.proxies[k].kind == ProxyKind::Scale).collect();
@@ -153,96 +153,8 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
     }
     let mut stages: Vec<StageCost> = Vec::new();
     let track_started = std::time::Instant::now();
-    let mut tracked = 0u32;
-    let mut pooled: Vec<f64> = Vec::new();
-    let mut starts: Vec<Vec<f64>> = Vec::new();
-    let mut kinds: Vec<Kind> = Vec::new();
-    // Each calibration frame's trial (index in statics, then motions).
-    let mut trial_of: Vec<usize> = Vec::new();
-    let inputs: Vec<(&(&str, &T), Kind)> =
-        statics.iter().map(|t| (t, Kind::Static)).chain(motions.iter().map(|t| (t, Kind::Motion))).collect();
-    // First pass, trial by trial: the markers matched, observed markers per frame, the frames
-    // the units check looks at (every (n / 20)th) and the candidate calibration frames.
-    let mut scans: Vec<(Vec<Option<usize>>, TrialScan)> = Vec::with_capacity(inputs.len());
-    for &((name, t), kind) in &inputs {
-        let header = t.header();
-        let map = match_markers(ctx, name, header)?.columns;
-        if map.iter().all(Option::is_none) {
-            return Err(no_match(ctx, name, header));
-        }
-        let read = |why: String| TrialError::Read { trial: name.to_string(), why };
-        let step = track_step(settings.calibration_track_step_s, header.rate_hz);
-        let rows = settings.calibration_coverage_m > 0.0;
-        let (scan, sample) = TrialScan::of(*t, &map, first_w(kind), step, settings.min_markers, rows).map_err(read)?;
-        units_check(ctx, name, &sample, stride, all_w(kind), &p0)?;
-        scans.push((map, scan));
-    }
-    // Each group's frames (statics, motions): spread over time, or over the range of poses
-    // (`calibration_coverage_m`).
-    let mut chosen: Vec<Vec<usize>> = Vec::with_capacity(inputs.len());
-    for kind in [Kind::Static, Kind::Motion] {
-        let group: Vec<&TrialScan> =
-            inputs.iter().zip(&scans).filter(|((_, k), _)| *k == kind).map(|(_, (_, s))| s).collect();
-        let wanted =
-            if kind == Kind::Static { settings.calibration_frames } else { settings.calibration_frames_motion };
-        chosen.extend(choose(&group, first_w(kind), settings.min_markers, wanted, settings.calibration_coverage_m));
-    }
-    for (input, ((((name, t), kind), (map, scan)), chosen)) in inputs.iter().zip(&scans).zip(&chosen).enumerate() {
-        let Some(&last) = chosen.last() else { continue };
-        let kind = *kind;
-        let read = |why: String| TrialError::Read { trial: name.to_string(), why };
-        // Track from the first usable frame to the last chosen one so that every chosen frame
-        // starts from a pose continuous with the motion (a cold start far into a motion can land
-        // in a wrong local minimum): every frame `calibration_track_step_s` apart (at least every
-        // frame; the chosen ones always), each warm-started from the one before. A static trial
-        // does not move: its chosen frames alone, each from the one before.
-        let counts = &scan.counts;
-        let (begin, step) = match kind {
-            Kind::Static => (chosen[0], usize::MAX),
-            _ => (
-                (0..=last).find(|&f| counts[f] >= settings.min_markers).unwrap_or(0),
-                track_step(settings.calibration_track_step_s, t.header().rate_hz),
-            ),
-        };
-        let w1 = first_w(kind);
-        let (tracking_ref, tracking_weights) = tracking_of(kind);
-        let template = FrameProblem { observed: &[], marker_weights: w1, tracking_ref, tracking_weights };
-        let mut tracker = Tracker::new(&mut solver, &p0);
-        let mut next = chosen.iter().copied().peekable();
-        // A trial held whole is read in place (its window of every frame is not a copy) and only
-        // the tracked frames' observations are gathered; one read from its file, a window at a
-        // time up to its last chosen frame.
-        let whole = t.window_frames() == usize::MAX;
-        let mut row = vec![f64::NAN; stride];
-        let mut a = begin;
-        while a <= last {
-            let (w0, b) =
-                if whole { (0, last + 1) } else { (a, a.saturating_add(t.window_frames().max(1)).min(last + 1)) };
-            let w = t.window(w0..if whole { t.header().n_frames() } else { b }).map_err(read)?;
-            for f in a..b {
-                let is_chosen = next.peek() == Some(&f);
-                if !is_chosen && (f - begin) % step != 0 {
-                    continue;
-                }
-                observation_row(&w, map, f - w0, &mut row);
-                // Frames between calibration frames only carry the pose forward: a few
-                // iterations (`calibration_track_iterations`) rather than convergence.
-                let cap = settings.calibration_track_iterations;
-                let iterations = if is_chosen || cap == 0 { settings.max_iterations } else { cap };
-                let p = tracker.step_limited(&mut solver, &row, &template, iterations);
-                tracked += 1;
-                if is_chosen {
-                    next.next();
-                    pooled.extend_from_slice(&row);
-                    starts.push(p.to_vec());
-                    kinds.push(kind);
-                    trial_of.push(input);
-                }
-            }
-            a = b;
-        }
-        tracker.end(&mut solver);
-    }
+    let Tracked { pooled, starts, kinds, trial_of, tracked } =
+        track_frames(ctx, statics, motions, &weights, &mut solver, &p0)?;
     if pooled.is_empty() {
         let trial = statics.iter().chain(motions).map(|(n, _)| *n).collect::<Vec<_>>().join(", ");
         return Err(TrialError::NothingToCalibrate { trial, min: settings.min_markers });
@@ -396,7 +308,181 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
             &cal.frame_proxies,
         );
     }
-    // How each motion trial's calibration frames fit the calibrated subject, against its siblings.
+    cal.trial_misfits = trial_misfits(ctx, &cal, &slices, &w_all, &trial_of, statics, motions);
+    let report = prior_report(ctx, &pri, &scale, &cal);
+    if let Some(h) = report.stature_m.filter(|h| !(0.5..=2.6).contains(h)) {
+        let trial = statics.iter().chain(motions).map(|(n, _)| *n).collect::<Vec<_>>().join(", ");
+        return Err(TrialError::Implausible {
+            trial,
+            message: format!(
+                "the calibrated subject is {h:.2} m tall, outside any human range: check the marker data's units (--units) and up axis (--up), and that the model fits the marker set"
+            ),
+        });
+    }
+    stages.push(StageCost::new("report", slices.len(), 0, 0, t));
+    Ok(Calibration { seconds: started.elapsed().as_secs_f64(), prior: report, stages, ..cal })
+}
+
+/// The marker weights and coordinate targets of a calibration frame, by its kind (static, motion).
+struct FrameWeights<'a> {
+    /// Every marker's weight.
+    all: [&'a Vec<f64>; 2],
+    /// The first stage's: only the markers that inform the scales.
+    first: [&'a Vec<f64>; 2],
+    /// Coordinate targets and their weights (a static frame's include the standing posture).
+    tracking: [(&'a Vec<f64>, &'a Vec<f64>); 2],
+}
+
+impl<'a> FrameWeights<'a> {
+    fn at(k: Kind) -> usize {
+        match k {
+            Kind::Static => 0,
+            Kind::Motion => 1,
+        }
+    }
+    fn all(&self, k: Kind) -> &'a Vec<f64> {
+        self.all[Self::at(k)]
+    }
+    fn first(&self, k: Kind) -> &'a Vec<f64> {
+        self.first[Self::at(k)]
+    }
+    fn tracking(&self, k: Kind) -> (&'a [f64], &'a [f64]) {
+        let (r, w) = self.tracking[Self::at(k)];
+        (r.as_slice(), w.as_slice())
+    }
+}
+
+/// The calibration frames of every trial and the pose each was tracked to.
+struct Tracked {
+    /// Observations of the chosen frames, `3·marker + axis` each, one after the other.
+    pooled: Vec<f64>,
+    /// Each chosen frame's tracked pose: its calibration start.
+    starts: Vec<Vec<f64>>,
+    kinds: Vec<Kind>,
+    /// Each chosen frame's trial (index in statics, then motions).
+    trial_of: Vec<usize>,
+    /// Frames tracked in all (chosen or carrying the pose between them).
+    tracked: u32,
+}
+
+/// Scans every trial (markers matched, the units check, candidate frames), chooses the
+/// calibration frames of the statics and of the motions, and tracks each trial from its first
+/// usable frame to its last chosen one so that every chosen frame starts from a pose continuous
+/// with the motion.
+fn track_frames<T: TrialFrames + ?Sized>(
+    ctx: &Context,
+    statics: &[(&str, &T)],
+    motions: &[(&str, &T)],
+    weights: &FrameWeights,
+    solver: &mut FrameSolver,
+    p0: &[f64],
+) -> Result<Tracked, TrialError> {
+    let settings = &ctx.settings;
+    let stride = 3 * ctx.model.markers.len();
+    let (first_w, all_w, tracking_of) = (|k| weights.first(k), |k| weights.all(k), |k| weights.tracking(k));
+    let mut tracked = 0u32;
+    let mut pooled: Vec<f64> = Vec::new();
+    let mut starts: Vec<Vec<f64>> = Vec::new();
+    let mut kinds: Vec<Kind> = Vec::new();
+    let mut trial_of: Vec<usize> = Vec::new();
+    let inputs: Vec<(&(&str, &T), Kind)> =
+        statics.iter().map(|t| (t, Kind::Static)).chain(motions.iter().map(|t| (t, Kind::Motion))).collect();
+    // First pass, trial by trial: the markers matched, observed markers per frame, the frames
+    // the units check looks at (every (n / 20)th) and the candidate calibration frames.
+    let mut scans: Vec<(Vec<Option<usize>>, TrialScan)> = Vec::with_capacity(inputs.len());
+    for &((name, t), kind) in &inputs {
+        let header = t.header();
+        let map = match_markers(ctx, name, header)?.columns;
+        if map.iter().all(Option::is_none) {
+            return Err(no_match(ctx, name, header));
+        }
+        let read = |why: String| TrialError::Read { trial: name.to_string(), why };
+        let step = track_step(settings.calibration_track_step_s, header.rate_hz);
+        let rows = settings.calibration_coverage_m > 0.0;
+        let (scan, sample) = TrialScan::of(*t, &map, first_w(kind), step, settings.min_markers, rows).map_err(read)?;
+        units_check(ctx, name, &sample, stride, all_w(kind), p0)?;
+        scans.push((map, scan));
+    }
+    // Each group's frames (statics, motions): spread over time, or over the range of poses
+    // (`calibration_coverage_m`).
+    let mut chosen: Vec<Vec<usize>> = Vec::with_capacity(inputs.len());
+    for kind in [Kind::Static, Kind::Motion] {
+        let group: Vec<&TrialScan> =
+            inputs.iter().zip(&scans).filter(|((_, k), _)| *k == kind).map(|(_, (_, s))| s).collect();
+        let wanted =
+            if kind == Kind::Static { settings.calibration_frames } else { settings.calibration_frames_motion };
+        chosen.extend(choose(&group, first_w(kind), settings.min_markers, wanted, settings.calibration_coverage_m));
+    }
+    for (input, ((((name, t), kind), (map, scan)), chosen)) in inputs.iter().zip(&scans).zip(&chosen).enumerate() {
+        let Some(&last) = chosen.last() else { continue };
+        let kind = *kind;
+        let read = |why: String| TrialError::Read { trial: name.to_string(), why };
+        // Track from the first usable frame to the last chosen one so that every chosen frame
+        // starts from a pose continuous with the motion (a cold start far into a motion can land
+        // in a wrong local minimum): every frame `calibration_track_step_s` apart (at least every
+        // frame; the chosen ones always), each warm-started from the one before. A static trial
+        // does not move: its chosen frames alone, each from the one before.
+        let counts = &scan.counts;
+        let (begin, step) = match kind {
+            Kind::Static => (chosen[0], usize::MAX),
+            _ => (
+                (0..=last).find(|&f| counts[f] >= settings.min_markers).unwrap_or(0),
+                track_step(settings.calibration_track_step_s, t.header().rate_hz),
+            ),
+        };
+        let w1 = first_w(kind);
+        let (tracking_ref, tracking_weights) = tracking_of(kind);
+        let template = FrameProblem { observed: &[], marker_weights: w1, tracking_ref, tracking_weights };
+        let mut tracker = Tracker::new(solver, p0);
+        let mut next = chosen.iter().copied().peekable();
+        // A trial held whole is read in place (its window of every frame is not a copy) and only
+        // the tracked frames' observations are gathered; one read from its file, a window at a
+        // time up to its last chosen frame.
+        let whole = t.window_frames() == usize::MAX;
+        let mut row = vec![f64::NAN; stride];
+        let mut a = begin;
+        while a <= last {
+            let (w0, b) =
+                if whole { (0, last + 1) } else { (a, a.saturating_add(t.window_frames().max(1)).min(last + 1)) };
+            let w = t.window(w0..if whole { t.header().n_frames() } else { b }).map_err(read)?;
+            for f in a..b {
+                let is_chosen = next.peek() == Some(&f);
+                if !is_chosen && (f - begin) % step != 0 {
+                    continue;
+                }
+                observation_row(&w, map, f - w0, &mut row);
+                // Frames between calibration frames only carry the pose forward: a few
+                // iterations (`calibration_track_iterations`) rather than convergence.
+                let cap = settings.calibration_track_iterations;
+                let iterations = if is_chosen || cap == 0 { settings.max_iterations } else { cap };
+                let p = tracker.step_limited(solver, &row, &template, iterations);
+                tracked += 1;
+                if is_chosen {
+                    next.next();
+                    pooled.extend_from_slice(&row);
+                    starts.push(p.to_vec());
+                    kinds.push(kind);
+                    trial_of.push(input);
+                }
+            }
+            a = b;
+        }
+        tracker.end(solver);
+    }
+    Ok(Tracked { pooled, starts, kinds, trial_of, tracked })
+}
+
+/// How each motion trial's calibration frames fit the calibrated subject, against its siblings
+/// ([`crate::pipeline::calibration::subject_check::misfits`]).
+fn trial_misfits<T: TrialFrames + ?Sized>(
+    ctx: &Context,
+    cal: &Calibration,
+    slices: &[&[f64]],
+    w_all: &[&[f64]],
+    trial_of: &[usize],
+    statics: &[(&str, &T)],
+    motions: &[(&str, &T)],
+) -> Vec<String> {
     let mut model = ctx.model.clone();
     if let Some(o) = &cal.marker_offsets {
         model.markers.iter_mut().zip(o).for_each(|(m, o)| m.offset = *o);
@@ -413,19 +499,7 @@ fn calibrate_pass<T: TrialFrames + ?Sized>(
     }
     let motion_fits: Vec<(&str, Vec<f64>)> =
         motions.iter().zip(per_trial.into_iter().skip(statics.len())).map(|((n, _), r)| (*n, r)).collect();
-    cal.trial_misfits = crate::pipeline::calibration::subject_check::misfits(&motion_fits);
-    let report = prior_report(ctx, &pri, &scale, &cal);
-    if let Some(h) = report.stature_m.filter(|h| !(0.5..=2.6).contains(h)) {
-        let trial = statics.iter().chain(motions).map(|(n, _)| *n).collect::<Vec<_>>().join(", ");
-        return Err(TrialError::Implausible {
-            trial,
-            message: format!(
-                "the calibrated subject is {h:.2} m tall, outside any human range: check the marker data's units (--units) and up axis (--up), and that the model fits the marker set"
-            ),
-        });
-    }
-    stages.push(StageCost::new("report", slices.len(), 0, 0, t));
-    Ok(Calibration { seconds: started.elapsed().as_secs_f64(), prior: report, stages, ..cal })
+    crate::pipeline::calibration::subject_check::misfits(&motion_fits)
 }
 
 #[cfg(test)]
