@@ -434,3 +434,126 @@ fn rows_wider_than_names_and_num_markers_agree_on_are_still_ragged() {
     assert!(matches!(e, TrcError::RaggedRow { n_markers: 5, .. }), "{e}");
     assert!(e.to_string().starts_with("ragged.trc:"), "{e}");
 }
+
+// ---- Header counts that disagree with the name row or the data ----
+
+/// A TRC whose header says `num_markers` markers and `num_frames` frames, whose line 4 names
+/// `names`, and whose data rows carry `carried` markers each (marker `m` of frame `f` at
+/// `(10f + m, m, 1)` mm) over `frames` frames; cells split by `sep`.
+fn declared(num_markers: usize, num_frames: usize, names: &[&str], carried: usize, frames: usize, sep: &str) -> String {
+    let mut s = format!(
+        "PathFileType{sep}4{sep}(X/Y/Z){sep}d.trc\nDataRate{sep}CameraRate{sep}NumFrames{sep}NumMarkers{sep}Units\n\
+         100{sep}100{sep}{num_frames}{sep}{num_markers}{sep}mm\nFrame#{sep}Time"
+    );
+    for n in names {
+        s += &format!("{sep}{n}{sep}{sep}");
+    }
+    s += &format!("\n{sep}");
+    for m in 1..=names.len() {
+        s += &format!("{sep}X{m}{sep}Y{m}{sep}Z{m}");
+    }
+    s += "\n\n";
+    for f in 0..frames {
+        s += &format!("{}{sep}{:.2}", f + 1, f as f64 / 100.0);
+        for m in 0..carried {
+            s += &format!("{sep}{}{sep}{m}{sep}1", 10 * f + m);
+        }
+        s += "\n";
+    }
+    s
+}
+
+fn at(f: usize, m: usize) -> [f64; 3] {
+    [(10 * f + m) as f64 * 1e-3, m as f64 * 1e-3, 1e-3]
+}
+
+fn warned<'a>(t: &'a MarkerTrial, what: &str) -> &'a str {
+    t.warnings.iter().find(|w| w.contains(what)).unwrap_or_else(|| panic!("no warning with {what:?}: {:?}", t.warnings))
+}
+
+#[test]
+fn num_markers_above_the_names_and_data_is_read_by_the_names_with_a_warning() {
+    let t = parse_trc(&declared(5, 4, &["A", "B", "C"], 3, 4, "\t"), "high.trc").unwrap();
+    assert_eq!((t.n_frames(), t.n_markers()), (4, 3));
+    assert_eq!(t.labels, ["A", "B", "C"]);
+    assert!(close(t.position(3, 2).unwrap(), at(3, 2)));
+    let w = warned(&t, "NumMarkers says 5");
+    assert!(w.contains("3 labels") && w.contains("using the labels"), "{w}");
+    assert_eq!(t.warnings.len(), 1, "{:?}", t.warnings);
+}
+
+#[test]
+fn num_markers_below_the_names_and_data_is_read_by_the_names_with_a_warning() {
+    let t = parse_trc(&declared(2, 4, &["A", "B", "C"], 3, 4, "\t"), "low.trc").unwrap();
+    assert_eq!((t.n_frames(), t.n_markers()), (4, 3));
+    assert!(close(t.position(1, 2).unwrap(), at(1, 2)));
+    let w = warned(&t, "NumMarkers says 2");
+    assert!(w.contains("3 labels") && w.contains("using the labels"), "{w}");
+    assert_eq!(t.warnings.len(), 1, "{:?}", t.warnings);
+}
+
+#[test]
+fn data_wider_than_the_names_reads_the_extra_markers_unnamed_when_num_markers_disagrees_with_the_names() {
+    // NumMarkers below the names, the rows wider still: the data decide, the extra unnamed.
+    let t = parse_trc(&declared(1, 3, &["A", "B"], 4, 3, "\t"), "wide.trc").unwrap();
+    assert_eq!(t.labels, ["A", "B", "M003", "M004"]);
+    assert!(close(t.position(2, 3).unwrap(), at(2, 3)));
+    let w = warned(&t, "M003");
+    assert!(w.contains("line 4 names 2 markers (NumMarkers 1)") && w.contains("carry 4"), "{w}");
+    // NumMarkers above the names (a cut-off name row): the same.
+    let t = parse_trc(&declared(4, 3, &["A", "B"], 4, 3, "\t"), "cut.trc").unwrap();
+    assert_eq!(t.labels, ["A", "B", "M003", "M004"]);
+}
+
+#[test]
+fn data_wider_than_names_that_num_markers_confirms_fails_saying_how_to_fix_it() {
+    let e = parse_trc(&declared(2, 3, &["A", "B"], 3, 3, "\t"), "ragged.trc").unwrap_err();
+    assert!(matches!(e, TrcError::RaggedRow { line: 7, found: 9, n_markers: 2, .. }), "{e}");
+    let msg = e.to_string();
+    assert!(msg.contains("name every marker on line 4 and set NumMarkers"), "{msg}");
+}
+
+#[test]
+fn names_beyond_what_every_row_carries_read_as_gaps_with_a_warning() {
+    // Four names and NumMarkers 4, every row carrying two markers: the last two are never seen.
+    let t = parse_trc(&declared(4, 3, &["A", "B", "C", "D"], 2, 3, " "), "short.trc").unwrap();
+    assert_eq!((t.n_frames(), t.n_markers()), (3, 4));
+    assert!(close(t.position(2, 1).unwrap(), at(2, 1)));
+    assert!((0..3).all(|f| t.position(f, 2).is_none() && t.position(f, 3).is_none()));
+    let w = warned(&t, "every data row is short");
+    assert!(w.contains("at most 6 coordinate cells") && w.contains("markers 3–4 (C…)"), "{w}");
+    // Rows that keep the empty cells of markers never seen are full width: no warning.
+    let text = declared(4, 3, &["A", "B", "C", "D"], 2, 3, "\t").replace("\t1\n", "\t1\t\t\t\t\t\t\n");
+    let t = parse_trc(&text, "unseen.trc").unwrap();
+    assert!(t.position(2, 3).is_none() && t.warnings.is_empty(), "{:?}", t.warnings);
+    // One short row is a trailing gap, not a wrong count: no warning.
+    let t = parse_trc(SMALL, "small").unwrap();
+    assert!(t.warnings.iter().all(|w| !w.contains("short")), "{:?}", t.warnings);
+}
+
+#[test]
+fn num_frames_disagreeing_with_the_rows_reads_the_rows_with_a_warning() {
+    for nf in [2, 9] {
+        let t = parse_trc(&declared(2, nf, &["A", "B"], 2, 5, "\t"), "frames.trc").unwrap();
+        assert_eq!(t.n_frames(), 5);
+        assert!(close(t.position(4, 1).unwrap(), at(4, 1)));
+        let w = warned(&t, &format!("NumFrames says {nf}"));
+        assert!(w.contains("5 data rows") && w.contains("using the rows"), "{w}");
+        assert_eq!(t.warnings.len(), 1, "{:?}", t.warnings);
+    }
+}
+
+#[test]
+fn spaces_instead_of_tabs_read_the_same_positions() {
+    let tabs = parse_trc(&declared(3, 4, &["A", "B", "C"], 3, 4, "\t"), "tabs.trc").unwrap();
+    assert!(tabs.warnings.is_empty(), "{:?}", tabs.warnings);
+    let spaces = parse_trc(&declared(3, 4, &["A", "B", "C"], 3, 4, " "), "spaces.trc").unwrap();
+    assert_eq!(spaces.labels, tabs.labels);
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&spaces.positions), bits(&tabs.positions));
+    assert_eq!(bits(&spaces.times), bits(&tabs.times));
+    // A header count that disagrees reads by the names there too.
+    let t = parse_trc(&declared(7, 4, &["A", "B", "C"], 3, 4, " "), "spaces.trc").unwrap();
+    assert_eq!(bits(&t.positions), bits(&tabs.positions));
+    warned(&t, "NumMarkers says 7");
+}

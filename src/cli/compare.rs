@@ -1,6 +1,7 @@
 //! `smocap compare OURS REFERENCE`: joint angles of a solved trial against a reference motion
 //! ([`crate::eval::compare`]).
 
+use crate::eval::compare::crosstalk::{corrected, CrossTalk, CrossTalkReport, Diagnosed};
 use crate::eval::compare::figure::write_figure;
 use crate::eval::compare::load::{load_motion, AngleMap, SHIPPED_MAPS};
 use crate::eval::compare::{compare, CompareOptions, Comparison, Quantity};
@@ -60,6 +61,11 @@ pub struct CompareArgs {
     /// Exit 3 when any compared angle's RMSE exceeds this (degrees).
     #[arg(long)]
     pub max_rmse: Option<f64>,
+    /// Also compare against the reference with its knee axes turned back by the axis errors its
+    /// knee cross-talk gives (adduction following flexion), and report the knee offsets and RMSE
+    /// after.
+    #[arg(long)]
+    pub correct_crosstalk: bool,
 }
 
 pub fn run(a: CompareArgs) -> anyhow::Result<u8> {
@@ -82,8 +88,28 @@ pub fn run(a: CompareArgs) -> anyhow::Result<u8> {
     let opt = CompareOptions { tolerance_s: a.tolerance, reference_shift_s: a.shift, coordinates };
     let c = compare(&ours, &reference, &opt)?;
     print!("{}", table(&c));
+    let pig;
+    let map_used = match map.as_ref() {
+        Some(m) => m,
+        None => {
+            pig = AngleMap::plug_in_gait();
+            &pig
+        }
+    };
+    let cross_talk = CrossTalkReport::of(&ours, &reference, map_used);
+    print!("{}", cross_talk_table(&cross_talk));
+    let after = match a.correct_crosstalk && !cross_talk.reference.is_empty() {
+        true => Some(compare(&ours, &corrected(&reference, &cross_talk.reference), &opt)?),
+        false => None,
+    };
+    if let Some(after) = &after {
+        print!("{}", corrected_table(&c, after, &cross_talk.reference));
+    } else if a.correct_crosstalk {
+        println!("--correct-crosstalk: the reference has no knee with both flexion and adduction; nothing turned");
+    }
     if let Some(p) = &a.json {
-        std::fs::write(p, serde_json::to_string_pretty(&c)?).with_context(|| format!("writing {}", p.display()))?;
+        let d = Diagnosed { comparison: c.clone(), cross_talk, corrected: after };
+        std::fs::write(p, serde_json::to_string_pretty(&d)?).with_context(|| format!("writing {}", p.display()))?;
     }
     if let Some(p) = &a.plot {
         write_figure(&c, &ours, &reference, a.worst, p)?;
@@ -140,6 +166,62 @@ pub fn table(c: &Comparison) -> String {
     }
     if !c.missing_in_ours.is_empty() {
         let _ = writeln!(s, "not in ours: {}", c.missing_in_ours.join(", "));
+    }
+    s
+}
+
+/// The knee cross-talk of both sides, when either has a knee's flexion and adduction.
+pub fn cross_talk_table(x: &CrossTalkReport) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    if x.is_empty() {
+        return s;
+    }
+    let _ = writeln!(s, "knee cross-talk (adduction following flexion: a flexion axis turned about the thigh)");
+    let _ = writeln!(
+        s,
+        "{:<10} {:<5} {:>6} {:>7} {:>8} {:>11} {:>11}",
+        "side", "knee", "frames", "r", "slope", "axis error", "r after"
+    );
+    for (who, found) in [("reference", &x.reference), ("ours", &x.ours)] {
+        for k in found.iter() {
+            let _ = writeln!(
+                s,
+                "{:<10} {:<5} {:>6} {:>7.3} {:>8.3} {:>10.1}° {:>11.3}",
+                who, k.side, k.fit.frames, k.fit.r, k.fit.slope, k.fit.axis_error_deg, k.r_corrected
+            );
+        }
+        if found.is_empty() {
+            let _ = writeln!(
+                s,
+                "{who:<10} no knee with both angles ({}): a hinge knee has no adduction to follow its flexion",
+                x.looked_for.join(", ")
+            );
+        }
+    }
+    s
+}
+
+/// The knee coordinates before and after turning the reference's knee axes back.
+pub fn corrected_table(before: &Comparison, after: &Comparison, turned: &[CrossTalk]) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let axes: Vec<String> = turned.iter().map(|k| format!("{} {:+.1}°", k.side, k.fit.axis_error_deg)).collect();
+    let _ = writeln!(s, "reference's knee axes turned back ({}):", axes.join(", "));
+    let _ = writeln!(
+        s,
+        "{:<22} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8}",
+        "coordinate", "offset", "after", "RMSE", "after", "centred", "after"
+    );
+    for k in turned {
+        for name in [&k.flexion, &k.adduction] {
+            let (Some(b), Some(a)) = (before.get(name), after.get(name)) else { continue };
+            let _ = writeln!(
+                s,
+                "{:<22} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>8.2}",
+                name, b.offset, a.offset, b.rmse, a.rmse, b.rmse_centred, a.rmse_centred
+            );
+        }
     }
     s
 }

@@ -7,6 +7,7 @@
 //! ±180°, and each coordinate gets its RMSE, mean offset, RMSE with the offset removed,
 //! correlation and largest difference ([`compare`]). The inputs are read by [`load`].
 
+pub mod crosstalk;
 pub mod figure;
 pub mod load;
 

@@ -30,7 +30,12 @@ pub enum TrcError {
     UnknownUnits { file: String, line: usize, units: String },
     #[error("{file}:{line}: column {column} is not a number: {value:?}")]
     NonNumeric { file: String, line: usize, column: usize, value: String },
-    #[error("{file}:{line}: row has {found} coordinate cells but {n_markers} markers allow {}", 3 * n_markers)]
+    #[error(
+        "{file}:{line}: row has {found} coordinate cells but {n_markers} markers allow {}: line 4 names {n_markers} \
+         markers and NumMarkers agrees (or is absent), so the extra cells are no marker's; to read them, name \
+         every marker on line 4 and set NumMarkers to their number, or remove the extra cells",
+        3 * n_markers
+    )]
     RaggedRow { file: String, line: usize, found: usize, n_markers: usize },
     #[error("{file}:{line}: no data rows")]
     NoData { file: String, line: usize },
@@ -215,6 +220,8 @@ struct Parser {
     widen: Option<(usize, Option<f64>)>,
     /// The cells of the row being parsed (byte ranges), kept to reuse its allocation.
     spans: Vec<(usize, usize)>,
+    /// The most coordinate cells of any data row (cells after frame and time).
+    widest: usize,
 }
 
 impl Parser {
@@ -234,6 +241,7 @@ impl Parser {
             offsets: Vec::new(),
             widen: None,
             spans: Vec::new(),
+            widest: 0,
         }
     }
 
@@ -311,17 +319,14 @@ impl Parser {
         }
         let num_markers = field("NumMarkers").and_then(|v| v.parse::<f64>().ok());
         // Cortex cuts the name row at a fixed length (NumMarkers above the names) and writes
-        // unlabelled exports as `NumMarkers 0` without names: the data rows then say how many
-        // markers there are.
+        // unlabelled exports as `NumMarkers 0` without names: when NumMarkers and the names
+        // disagree (or there are no names), the data rows say how many markers there are (the
+        // warning is given once they are read). Names and NumMarkers agreeing, or names alone,
+        // bound the rows: a wider row is an error.
         let widen = match num_markers {
-            Some(n) => n > nm as f64 || (n == 0.0 && nm == 0),
+            Some(n) => n != nm as f64 || nm == 0,
             None => nm == 0,
         };
-        if let Some(n) = num_markers.filter(|_| !widen) {
-            if n != nm as f64 {
-                warnings.push(format!("NumMarkers says {n} but line 4 has {nm} labels; using the labels"));
-            }
-        }
 
         // Line 5 is normally `X1 Y1 Z1 ...`; if it already looks like data, read it as data.
         let mut first_data = 5;
@@ -361,6 +366,10 @@ impl Parser {
             trial.times.reserve_exact(rows);
             trial.frame_numbers.reserve_exact(rows);
         }
+        if raw.contains('\t') {
+            // Trailing empty cells (a marker unseen at the row's end) still count as the file's width.
+            self.widest = self.widest.max(raw.bytes().filter(|&b| b == b'\t').count().saturating_sub(1));
+        }
         let mut spans = std::mem::take(&mut self.spans);
         cell_spans(row, &mut spans);
         let out = self.row_cells(line, row, &spans);
@@ -377,6 +386,7 @@ impl Parser {
         let file = &self.file;
         let non_numeric =
             |column: usize, value: &str| TrcError::NonNumeric { file: file.clone(), line, column, value: clip(value) };
+        self.widest = self.widest.max(c.len().saturating_sub(2));
         if c.len() > 2 + 3 * nm {
             if self.widen.is_none() {
                 return Err(TrcError::RaggedRow { file: file.clone(), line, found: c.len() - 2, n_markers: nm });
@@ -440,7 +450,10 @@ impl Parser {
         trial.frame_numbers.shrink_to_fit();
         if let Some(n) = self.header.as_ref().and_then(|h| h.num_frames) {
             if n != trial.n_frames() as f64 {
-                self.warnings.push(format!("NumFrames says {n} but {} data rows were read", trial.n_frames()));
+                self.warnings.push(format!(
+                    "NumFrames says {n} but {} data rows were read; using the rows",
+                    trial.n_frames()
+                ));
             }
         }
         if let Some((named, num_markers)) = self.widen {
@@ -466,6 +479,19 @@ impl Parser {
                     unnamed_label(nm)
                 ));
             }
+        }
+        // Rows that all stop short of the markers named (empty trailing cells between tabs count):
+        // NumMarkers and line 4 name more markers than the file holds (or its last ones are never
+        // seen and the rows lost their empty cells).
+        let nm = trial.n_markers();
+        let named = self.widen.map_or(nm, |(named, _)| named);
+        if nm > 0 && nm == named && self.widest < 3 * nm {
+            let first = self.widest / 3 + 1;
+            self.warnings.push(format!(
+                "{}: every data row is short: at most {} coordinate cells for the {nm} markers line 4 names; \
+                 markers {first}–{nm} ({}…) read as gaps throughout (check NumMarkers and line 4)",
+                self.file, self.widest, trial.labels[first - 1]
+            ));
         }
         trial.warnings = self.warnings;
         Ok(trial)
