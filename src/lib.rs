@@ -6,9 +6,11 @@
 //! Jacobians, Gauss–Newton assembly) → [`solve`] (trust-region QP, QP backends, calibration) →
 //! [`pipeline`] (trials, reports) → [`archive`] (whole datasets to MCAP) → [`render`] (glTF scenes,
 //! cameras, 2D ground truth, previews) → the `smocap` command line;
-//! [`eval`] holds the evaluation studies built on the pipeline.
+//! [`eval`] holds the evaluation studies built on the pipeline; [`body`] is the skinned CC0 body mesh
+//! (with its adult shape space) that dresses a solved skeleton.
 
 pub mod archive;
+pub mod body;
 pub mod cli;
 pub mod eval;
 pub mod io;
