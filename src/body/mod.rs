@@ -19,5 +19,6 @@
 //! below horizontal), which is its bind pose; it is not the model's neutral pose (arms down).
 
 pub mod asset;
+pub mod bind;
 
 pub use asset::{BodyAsset, BodyError, BodyShape, Phenotype, Skin};
