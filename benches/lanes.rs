@@ -71,8 +71,8 @@ fn lanes(c: &mut Criterion) {
     let frames = 400;
     let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames, seed: 8, ..SynthOptions::default() });
     let cal = calibrate_subject(&ctx, &[("bench", &s.trial)]).expect("calibration");
-    let map = smocap::pipeline::trial::match_markers(&ctx, "synthetic", &s.trial).unwrap().columns;
-    let obs = smocap::pipeline::trial::observations(&s.trial, &map);
+    let map = smocap::pipeline::input::trial::match_markers(&ctx, "synthetic", &s.trial).unwrap().columns;
+    let obs = smocap::pipeline::input::trial::observations(&s.trial, &map);
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
 

@@ -16,8 +16,8 @@ fn solve_sequence(c: &mut Criterion) {
     let frames = 200;
     let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames, seed: 3, ..SynthOptions::default() });
     let cal = calibrate_subject(&ctx, &[("bench", &s.trial)]).expect("calibration");
-    let map = smocap::pipeline::trial::match_markers(&ctx, "synthetic", &s.trial).unwrap().columns;
-    let obs = smocap::pipeline::trial::observations(&s.trial, &map);
+    let map = smocap::pipeline::input::trial::match_markers(&ctx, "synthetic", &s.trial).unwrap().columns;
+    let obs = smocap::pipeline::input::trial::observations(&s.trial, &map);
     let stride = 3 * ctx.model.markers.len();
     let eval = ctx.evaluator();
     let ny = ctx.model.ny();

@@ -4,10 +4,12 @@
 //! Data flows through the modules in this order: [`io`] (marker files, model files) →
 //! [`model`] (immutable tree, scales, markers, proxy map) → [`kinematics`] (forward kinematics,
 //! Jacobians, Gauss–Newton assembly) → [`solve`] (trust-region QP, QP backends, calibration) →
-//! [`pipeline`] (trials, reports) → [`archive`] (whole datasets to MCAP) → [`render`] (glTF scenes,
-//! cameras, 2D ground truth, previews) → the `smocap` command line;
-//! [`eval`] holds the evaluation studies built on the pipeline; [`body`] is the skinned CC0 body mesh
-//! (with its adult shape space) that dresses a solved skeleton.
+//! [`pipeline`] (input, calibration, running, results) → [`archive`] (whole datasets to MCAP) →
+//! [`body`] (a skinned CC0 body mesh on the solved skeleton), [`retarget`] (humanoid robots),
+//! [`render`] (glTF scenes, cameras, 2D ground truth, previews)
+//! and [`eval`] (the evaluation studies) → the `smocap` command line. A module imports only from
+//! the layers before it (`docs/ARCHITECTURE.md`, checked by `tests/architecture.rs`); `io` reads
+//! files into [`model`]'s types, so [`model`] sits below it.
 
 pub mod archive;
 pub mod body;
@@ -18,4 +20,5 @@ pub mod kinematics;
 pub mod model;
 pub mod pipeline;
 pub mod render;
+pub mod retarget;
 pub mod solve;

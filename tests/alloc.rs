@@ -181,8 +181,8 @@ fn writing_frames_allocates_far_less_than_once_per_frame() {
     };
     // The frames, made before counting (the solver hands them over as they are), with their
     // observations in model order as the solver reads them.
-    let map = smocap::pipeline::trial::match_markers(&ctx, "t", &s.trial).unwrap().columns;
-    let obs = smocap::pipeline::trial::observations(&s.trial, &map);
+    let map = smocap::pipeline::input::trial::match_markers(&ctx, "t", &s.trial).unwrap().columns;
+    let obs = smocap::pipeline::input::trial::observations(&s.trial, &map);
     let stride = 3 * map.len();
     let frames: Vec<SolvedFrame> = (0..n)
         .map(|f| SolvedFrame {
@@ -242,8 +242,8 @@ fn the_label_screen_allocates_no_more_for_more_frames() {
     let ctx = Context::shipped().unwrap();
     let screen = |n: usize| {
         let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: n, seed: 3, ..SynthOptions::default() });
-        let columns = smocap::pipeline::trial::match_markers(&ctx, "t", &s.trial).unwrap().columns;
-        allocations_of(|| drop(smocap::pipeline::label_qc::screen_trial(&ctx, &s.trial, &columns).unwrap()))
+        let columns = smocap::pipeline::input::trial::match_markers(&ctx, "t", &s.trial).unwrap().columns;
+        allocations_of(|| drop(smocap::pipeline::input::label_qc::screen_trial(&ctx, &s.trial, &columns).unwrap()))
     };
     let (a, b) = (screen(500), screen(2000));
     // Per rigid-pair candidate a sample buffer reserved once; per frame nothing (clean frames).

@@ -10,9 +10,9 @@ use common::shared;
 use smocap::eval::compare::load::{angles_from_markers, motion_from_table, AngleMap};
 use smocap::eval::compare::{compare, CompareOptions, Comparison, Motion};
 use smocap::io::MarkerTrial;
-use smocap::pipeline::convention::InputOptions;
-use smocap::pipeline::export::motion_table;
-use smocap::pipeline::subject::{calibrate_placed_with, prepare_subject, read_trial, SubjectFiles};
+use smocap::pipeline::calibration::subject::{calibrate_placed_with, prepare_subject, read_trial, SubjectFiles};
+use smocap::pipeline::input::convention::InputOptions;
+use smocap::pipeline::results::export::motion_table;
 use smocap::pipeline::{solve_trial, Context, TrialResult};
 use std::path::Path;
 
@@ -240,7 +240,7 @@ fn plug_in_gait_static_feet_solve_level() {
     // The static trial solved on the markers alone, as every trial is: both feet level.
     let r = solve_trial(&ctx, "static", &ts, &cal, 2).expect("solves");
     let up = ctx.up.expect("the shipped model has gravity");
-    for foot in smocap::pipeline::feet_flat::level_targets(&ctx.model, &ctx.proxy, &up, &r.proxies) {
+    for foot in smocap::pipeline::calibration::feet_flat::level_targets(&ctx.model, &ctx.proxy, &up, &r.proxies) {
         let name = &ctx.model.bodies[foot.body].name;
         eprintln!("{name}: pitched {:+.2}° standing", foot.tilt_deg);
         assert!(foot.tilt_deg.abs() < 1.0, "{name} pitched {:+.2}° standing", foot.tilt_deg);
@@ -251,10 +251,11 @@ fn plug_in_gait_static_feet_solve_level() {
     let (cal, placed) = calibrate_placed_with(&off, &[("static", &ts)], &[]).expect("calibrates");
     let ctx = placed.expect("registered");
     let r = solve_trial(&ctx, "static", &ts, &cal, 2).expect("solves");
-    let tilts: Vec<f64> = smocap::pipeline::feet_flat::level_targets(&ctx.model, &ctx.proxy, &up, &r.proxies)
-        .iter()
-        .map(|f| f.tilt_deg)
-        .collect();
+    let tilts: Vec<f64> =
+        smocap::pipeline::calibration::feet_flat::level_targets(&ctx.model, &ctx.proxy, &up, &r.proxies)
+            .iter()
+            .map(|f| f.tilt_deg)
+            .collect();
     eprintln!("without: pitched {tilts:+.2?}");
     assert!(cal.posture.feet.is_empty() && tilts.iter().any(|t| t.abs() > 1.0), "{tilts:?}");
 }
@@ -352,7 +353,7 @@ fn realistic_skin_markers_give_core_angles_within_2_degrees() {
         for (p, q) in r.proxies.iter().zip(&s.truth_q) {
             let y = ctx.proxy.state(p);
             for &j in &core {
-                sq += smocap::solve::init::wrap_angle(y[j] - q[j]).to_degrees().powi(2);
+                sq += smocap::model::math::wrap_angle(y[j] - q[j]).to_degrees().powi(2);
                 n += 1;
             }
         }

@@ -9,9 +9,9 @@ use smocap::io::MarkerTrial;
 use smocap::kinematics::synth::{synthesize, SynthOptions};
 use smocap::model::anthropometry::{Sex, SubjectInfo};
 use smocap::model::proxy::ProxyKind;
-use smocap::pipeline::convention::InputOptions;
-use smocap::pipeline::report::trial_report;
-use smocap::pipeline::subject::{calibrate_placed_with, prepare_subject, read_trial, SubjectFiles};
+use smocap::pipeline::calibration::subject::{calibrate_placed_with, prepare_subject, read_trial, SubjectFiles};
+use smocap::pipeline::input::convention::InputOptions;
+use smocap::pipeline::results::report::trial_report;
 use smocap::pipeline::{calibrate_subject, solve_trial, Context};
 use smocap::solve::{Calibration, FrameStatus};
 use std::path::Path;
@@ -110,9 +110,9 @@ fn reimported_rmse_mm(scaled: &Path, mot: &Path, ik_setup: &Path, trial_path: &P
     let mut ctx = Context::from_files_with_markers(scaled, None, None).expect("scaled model reads");
     ctx.apply_ik_setup(&smocap::io::osim::read_ik_setup(ik_setup).expect("ik setup")).expect("applies");
     let (trial, _) = read_trial(&ctx, trial_path, &InputOptions::default()).expect("trial");
-    let map = smocap::pipeline::trial::match_markers(&ctx, "t", &trial).expect("matches").columns;
+    let map = smocap::pipeline::input::trial::match_markers(&ctx, "t", &trial).expect("matches").columns;
     let table = smocap::io::sto::read_sto(mot).expect("mot");
-    let deg = smocap::pipeline::export::opensim_degrees(&ctx.model);
+    let deg = smocap::pipeline::results::export::opensim_degrees(&ctx.model);
     let p0 = ctx.proxy.default_proxies();
     let mut ws = smocap::kinematics::cpu::Workspace::new(&ctx.model);
     let mut sum = 0.0;
@@ -195,8 +195,8 @@ fn exported_scaled_model_and_motion_reproduce_the_reported_fit_and_beat_opensim(
         let reported = trial_report(&ctx, &r, None).marker_rmse_mm.expect("rmse").mean;
         let mot = out.join(format!("{name}.mot"));
         let osim = out.join(format!("{name}.osim"));
-        smocap::pipeline::export::write_mot(&ctx, &r, &wt, &mot).expect("mot");
-        smocap::pipeline::export::write_scaled_model(&ctx, &cal, Some(&dir.join(model)), &osim).expect("osim");
+        smocap::pipeline::results::export::write_mot(&ctx, &r, &wt, &mot).expect("mot");
+        smocap::pipeline::results::export::write_scaled_model(&ctx, &cal, Some(&dir.join(model)), &osim).expect("osim");
         let solved: Vec<bool> = r.stats.iter().map(|s| s.status != FrameStatus::TooFewMarkers).collect();
         let again = reimported_rmse_mm(&osim, &mot, &dir.join(ik), &dir.join(walk), &solved);
         // OpenSim 4.6's own Scale + IK on the same files (../shared/reference).
@@ -509,7 +509,7 @@ fn a_converted_files_state_and_scaled_model_reproduce_its_recorded_fit() {
     let mut ctx = Context::from_files_with_markers(&osim, None, None).expect("scaled model reads");
     ctx.apply_ik_setup(&smocap::io::osim::read_ik_setup(&dir.join("subject01_Setup_IK.xml")).unwrap()).unwrap();
     let (trial, _) = read_trial(&ctx, &dir.join("subject01_walk1.trc"), &InputOptions::default()).unwrap();
-    let map = smocap::pipeline::trial::match_markers(&ctx, "t", &trial).unwrap().columns;
+    let map = smocap::pipeline::input::trial::match_markers(&ctx, "t", &trial).unwrap().columns;
     let mut ws = smocap::kinematics::cpu::Workspace::new(&ctx.model);
     let p0 = ctx.proxy.default_proxies();
     let (mut again, mut recorded, mut n) = (0.0, 0.0, 0);
@@ -578,7 +578,7 @@ fn static_arms_at_neutral_fix_the_forearm_and_hand_that_misplaced_landmarks_turn
             for (p, q) in r.proxies.iter().zip(&s.truth_q) {
                 let y = ctx.proxy.state(p);
                 for &j in &forearm {
-                    sq += smocap::solve::init::wrap_angle(y[j] - q[j]).to_degrees().powi(2);
+                    sq += smocap::model::math::wrap_angle(y[j] - q[j]).to_degrees().powi(2);
                     n += 1;
                 }
             }

@@ -4,10 +4,11 @@
 
 use smocap::eval::hard::{base, hard_set};
 use smocap::kinematics::assembly::FrameProblem;
+use smocap::model::math::wrap_angle;
 use smocap::model::proxy::ProxyKind;
-use smocap::pipeline::trial::observations;
+use smocap::pipeline::input::trial::observations;
 use smocap::pipeline::{calibrate_subject, Context};
-use smocap::solve::init::{multi_start, wrap_angle};
+use smocap::solve::init::multi_start;
 use smocap::solve::{make_qp, FrameSolver, FrameStatus};
 use std::time::Instant;
 

@@ -4,7 +4,7 @@
 use smocap::io::sto::read_sto;
 use smocap::io::MarkerTrial;
 use smocap::kinematics::synth::{synthesize, SynthOptions};
-use smocap::pipeline::export::write_mot;
+use smocap::pipeline::results::export::write_mot;
 use smocap::pipeline::{calibrate_subject, solve_trial, Context};
 use std::f64::consts::TAU;
 
@@ -56,8 +56,8 @@ fn a_subject_turning_twice_gets_a_continuous_pelvis_rotation_in_the_mot() {
 /// pre-solve pass ([`resolve_flips`]) and comes back to the pose the trial was solved with.
 #[test]
 fn a_frame_with_a_leg_half_a_turn_round_is_solved_again_from_its_neighbour() {
-    use smocap::pipeline::lanes::{resolve_flips, FrameObservations, FrameResult};
-    use smocap::pipeline::stream::SubjectInputs;
+    use smocap::pipeline::running::lanes::{resolve_flips, FrameObservations, FrameResult};
+    use smocap::pipeline::running::stream::SubjectInputs;
     let ctx = Context::shipped().unwrap();
     let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 40, seed: 6, ..SynthOptions::default() });
     let cal = calibrate_subject(&ctx, &[("walk", &s.trial)]).unwrap();
@@ -66,7 +66,7 @@ fn a_frame_with_a_leg_half_a_turn_round_is_solved_again_from_its_neighbour() {
     let pinned = ctx.pinned_to(&cal);
     let (eval, settings) = (pinned.evaluator(), &pinned.settings);
     let subject = SubjectInputs::new(&pinned, &cal);
-    let m = smocap::pipeline::trial::match_markers(&pinned, "walk", &s.trial).unwrap();
+    let m = smocap::pipeline::input::trial::match_markers(&pinned, "walk", &s.trial).unwrap();
     let inputs = subject.inputs(FrameObservations { trial: &s.trial, map: &m.columns });
     let mut results: Vec<Option<FrameResult>> =
         r.proxies.iter().zip(&r.stats).map(|(p, st)| Some((p.clone(), *st, 0.0))).collect();

@@ -4,7 +4,7 @@
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use smocap::io::MarkerTrial;
 use smocap::kinematics::synth::{synthesize, SynthOptions};
-use smocap::pipeline::convention::{conform_trial, rotate, rotation_between, InputOptions, Units, UpAxis};
+use smocap::pipeline::input::convention::{conform_trial, rotate, rotation_between, InputOptions, Units, UpAxis};
 use smocap::pipeline::Context;
 use std::path::Path;
 

@@ -116,7 +116,7 @@ fn convert_with_one_or_two_jobs_gives_identical_outputs_and_summary_numbers() {
 
 #[test]
 fn segments_are_a_function_of_the_frame_count_alone() {
-    use smocap::pipeline::stream::{segments, SEGMENT_FRAMES};
+    use smocap::pipeline::running::stream::{segments, SEGMENT_FRAMES};
     assert_eq!(segments(151), [(0, 151)]);
     assert_eq!(segments(450), [(0, 225), (225, 450)]);
     for n in [1, 199, 200, 401, 10_000] {
@@ -142,7 +142,7 @@ fn a_segment_cut_is_invisible_in_the_result() {
         &SynthOptions { frames: 450, seed: 31, noise_m: 0.002, ..SynthOptions::default() },
     );
     let cal = calibrate_subject(&ctx, &[("t", &s.trial)]).unwrap();
-    let cut = smocap::pipeline::stream::segments(450)[1].0;
+    let cut = smocap::pipeline::running::stream::segments(450)[1].0;
     let n = 399;
     let w = 3 * s.trial.n_markers();
     let mut head = s.trial.clone();

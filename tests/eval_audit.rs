@@ -91,7 +91,7 @@ fn stagewise_scaling_reproduces_opensims_scale_tool_on_gait2354() {
         eprintln!("note: {} absent, skipped", dir.display());
         return;
     }
-    use smocap::pipeline::subject::{prepare_subject, read_trial, SubjectFiles};
+    use smocap::pipeline::calibration::subject::{prepare_subject, read_trial, SubjectFiles};
     let setup_path = dir.join("subject01_Setup_Scale.xml");
     let sub = prepare_subject(&SubjectFiles {
         model: Some(dir.join("gait2354_simbody.osim")),

@@ -1,6 +1,9 @@
 //! Hostile inputs and runs (issue 12): concurrent converts into one folder, outputs that
 //! collide or escape `--out`, discovery through link loops and FIFOs, absurd models, corrupt
 //! MCAP files, absurd counts, garbage marker data, and one exit-code scheme.
+//!
+//! Over 600 lines: one family of behaviour (what smocap does with hostile input) whose tests share
+//! their fixtures and the exit-code table; a reader checks the scheme in one file.
 
 use smocap::archive::config::{read_datasets, SyntheticSpec};
 use smocap::archive::inspect::{inspect, verify};

@@ -112,7 +112,7 @@ fn solve_with_setup(dir: &str, model: &str, set: &str, stat: &str, walk: &str, s
     let walk_t = smocap::io::read_markers(&d.join(walk)).expect("walk");
     let static_t = smocap::io::read_markers(&d.join(stat)).expect("static");
     let expected = opensim_markers_used(&r);
-    let map = smocap::pipeline::trial::match_markers(&ctx, walk, &walk_t).expect("match").columns;
+    let map = smocap::pipeline::input::trial::match_markers(&ctx, walk, &walk_t).expect("match").columns;
     let used = map.iter().zip(&ctx.marker_weights).filter(|(c, &w)| c.is_some() && w > 0.0).count();
     assert_eq!(used, expected, "markers weighted and in the file, as OpenSim counts them");
     let cal = calibrate_subject(&ctx, &[(stat, &static_t)]).expect("calibrates");

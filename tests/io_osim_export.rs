@@ -372,7 +372,7 @@ fn hips_moved_by_calibration_are_written_where_the_subjects_model_has_them() {
             }
         })
         .collect();
-    let moved = smocap::pipeline::joint_centres::with_joint_moves(&generic, &moves);
+    let moved = smocap::pipeline::context::with_joint_moves(&generic, &moves);
     let mut r = rng(5);
     let s: Vec<Vector3<f64>> = (0..moved.nb()).map(|_| Vector3::from_fn(|_, _| r.random_range(0.8..1.25))).collect();
     let text = std::fs::read_to_string(&path).expect("text");

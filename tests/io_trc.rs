@@ -410,7 +410,7 @@ fn unlabelled_exports_are_read_with_numbered_markers_and_refused_by_the_solver()
     let w = t.warnings.iter().find(|w| w.contains("unlabelled")).expect("a warning");
     assert!(w.starts_with("unlabelled.trc: "), "{w}");
     let ctx = smocap::pipeline::Context::shipped().unwrap();
-    let e = smocap::pipeline::trial::match_markers(&ctx, "unlabelled", &t).unwrap_err();
+    let e = smocap::pipeline::input::trial::match_markers(&ctx, "unlabelled", &t).unwrap_err();
     assert!(e.to_string().contains("unlabelled") && e.to_string().contains("20 markers"), "{e}");
 }
 
@@ -420,7 +420,7 @@ fn unnamed_markers_of_a_cut_off_row_never_match_model_markers() {
     text = text.replace("Marker0", "LASI").replace("Marker1", "RASI");
     let t = parse_trc(&text, "cut.trc").unwrap();
     let ctx = smocap::pipeline::Context::shipped().unwrap();
-    let m = smocap::pipeline::trial::match_markers(&ctx, "cut", &t).unwrap();
+    let m = smocap::pipeline::input::trial::match_markers(&ctx, "cut", &t).unwrap();
     let matched: Vec<usize> = m.columns.iter().flatten().copied().collect();
     assert_eq!(matched.len(), 2, "{matched:?}");
     assert!(matched.iter().all(|&c| c < 2));

@@ -403,8 +403,8 @@ fn the_same_trial_solved_on_wgpu_and_cpu_agrees_to_a_hundredth_of_a_millimetre_a
     let Some(mut gpu) = gpu(&eval, 1024, Kernel::default()) else { return };
     let a = solve_trial_with(&ctx, "t", &s.trial, &cal, 2, 2, None).unwrap();
     let b = solve_trial_with(&ctx, "t", &s.trial, &cal, 2, 2, Some(&mut gpu)).unwrap();
-    let map = smocap::pipeline::trial::match_markers(&ctx, "synthetic", &s.trial).unwrap().columns;
-    let obs = smocap::pipeline::trial::observations(&s.trial, &map);
+    let map = smocap::pipeline::input::trial::match_markers(&ctx, "synthetic", &s.trial).unwrap().columns;
+    let obs = smocap::pipeline::input::trial::observations(&s.trial, &map);
     let stride = 3 * ctx.model.markers.len();
     let zeros = vec![0.0; ctx.model.ny()];
     let mut ws = smocap::kinematics::assembly::EvalWorkspace::new(&ctx.model, &ctx.proxy);

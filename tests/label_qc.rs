@@ -1,4 +1,4 @@
-//! Label quality control (`smocap::pipeline::label_qc`): swapped labels (left/right pairs and
+//! Label quality control (`smocap::pipeline::input::label_qc`): swapped labels (left/right pairs and
 //! neighbours on one body or adjacent bodies) and jumps injected into synthetic trials are found,
 //! swaps repaired so that the joint angles are those of the clean trial; nothing is reported on
 //! the clean trials of the same seeds nor on the shared real trials.
@@ -10,9 +10,9 @@ use prost::Message;
 use rand::RngExt;
 use smocap::io::MarkerTrial;
 use smocap::kinematics::synth::{synthesize, SynthOptions, Synthetic};
-use smocap::pipeline::convention::InputOptions;
-use smocap::pipeline::label_qc::{screen_in_place, screen_trial, Action, EventKind, LabelQc, QcMode};
-use smocap::pipeline::trial::match_markers;
+use smocap::pipeline::input::convention::InputOptions;
+use smocap::pipeline::input::label_qc::{screen_in_place, screen_trial, Action, EventKind, LabelQc, QcMode};
+use smocap::pipeline::input::trial::match_markers;
 use smocap::pipeline::{calibrate_subject, session, solve_trial, Context};
 use std::path::Path;
 use std::process::Command;
@@ -172,9 +172,9 @@ fn angle_rmse(ctx: &Context, s: &Synthetic, t: &MarkerTrial, mode: QcMode) -> (f
     assert_eq!(table.anatomical.len() + table.tracking.len(), ctx.model.markers.len());
     assert!(!table.anatomical.is_empty() && !table.tracking.is_empty());
     assert!(table.anatomical.iter().chain(&table.tracking).all(|e| e.max_mm >= e.rmse_mm && e.frames > 0));
-    assert_eq!(table.worst_frames.len(), smocap::pipeline::marker_errors::WORST_FRAMES);
+    assert_eq!(table.worst_frames.len(), smocap::pipeline::running::marker_errors::WORST_FRAMES);
     assert!(table.worst_frames.windows(2).all(|w| w[0].rmse_mm >= w[1].rmse_mm));
-    let rep = smocap::pipeline::report::trial_report(&ctx, &r, Some(&s.truth));
+    let rep = smocap::pipeline::results::report::trial_report(&ctx, &r, Some(&s.truth));
     (rep.pose_error_deg.expect("truth given").rmse, qc)
 }
 

@@ -6,7 +6,7 @@
 
 use smocap::io::MarkerTrial;
 use smocap::kinematics::synth::{synthesize, SynthOptions};
-use smocap::pipeline::stream::{solve_trials_streaming, TrialStream};
+use smocap::pipeline::running::stream::{solve_trials_streaming, TrialStream};
 use smocap::pipeline::{calibrate_subject, solve_trial_with, Context, SolvedFrame};
 use smocap::solve::Presolve;
 
@@ -84,7 +84,7 @@ fn together(
     let mut sinks: Vec<_> = got
         .iter_mut()
         .map(|g| {
-            move |f: SolvedFrame| -> Result<(), smocap::pipeline::trial::SinkError> {
+            move |f: SolvedFrame| -> Result<(), smocap::pipeline::input::trial::SinkError> {
                 g.push(bits(&f));
                 Ok(())
             }
@@ -107,7 +107,7 @@ fn together(
 /// A trial held whole but read `.1` frames at a time.
 struct Windowed<'a>(&'a MarkerTrial, usize);
 
-impl smocap::pipeline::frames::TrialFrames for Windowed<'_> {
+impl smocap::pipeline::input::frames::TrialFrames for Windowed<'_> {
     fn header(&self) -> &MarkerTrial {
         self.0
     }

@@ -1,7 +1,7 @@
 //! Matching model marker names to marker file labels: exact, case-insensitive, subject prefix
 //! stripped; ambiguity is an error naming both; unmatched names on both sides are listed.
 
-use smocap::pipeline::matching::{match_names, strip_subject_prefix, MatchError, MatchKind};
+use smocap::pipeline::input::matching::{match_names, strip_subject_prefix, MatchError, MatchKind};
 
 fn labels(v: &[&str]) -> Vec<String> {
     v.iter().map(|s| s.to_string()).collect()
@@ -84,7 +84,7 @@ fn a_stricter_pass_wins_over_a_synonym_and_profiles_add_synonyms() {
     let m = match_names(&["LASI"], &labels(&["LFWT", "LASI"])).expect("exact wins");
     assert_eq!(m.columns, vec![Some(1)]);
     assert_eq!(m.unmatched_trial, vec!["LFWT".to_string()]);
-    let mut syn = smocap::pipeline::matching::Synonyms::default();
+    let mut syn = smocap::pipeline::input::matching::Synonyms::default();
     assert!(!syn.equivalent("KNEE_OUT", "RKNE"));
     syn.add_group(["KNEE_OUT", "RKNE"]);
     assert!(syn.equivalent("knee.out", "R.Knee"));

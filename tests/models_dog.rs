@@ -4,7 +4,7 @@
 
 use smocap::kinematics::synth::{periodic_gait, synthesize_with, SynthOptions};
 use smocap::model::proxy::ProxyKind;
-use smocap::pipeline::report::trial_report;
+use smocap::pipeline::results::report::trial_report;
 use smocap::pipeline::{calibrate_subject, solve_trial, Context};
 use std::f64::consts::PI;
 use std::path::Path;

@@ -5,7 +5,7 @@ mod common;
 
 use common::shared;
 use smocap::io::sto::{format_sto, parse_sto, read_sto, write_sto};
-use smocap::pipeline::export::{motion_table, opensim_degrees};
+use smocap::pipeline::results::export::{motion_table, opensim_degrees};
 use smocap::pipeline::Context;
 
 /// A context for an OpenSim dataset's generic model, its IK motion, and proxies reproducing it.

@@ -9,7 +9,7 @@ mod common;
 use common::shared;
 use smocap::io::osim::{read_ik_setup, read_scale_setup};
 use smocap::io::read_markers;
-use smocap::pipeline::calibration::calibrate_subject_with;
+use smocap::pipeline::calibration::calibrate::calibrate_subject_with;
 use smocap::pipeline::{solve_trial, Context};
 use smocap::solve::FrameStatus;
 

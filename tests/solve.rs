@@ -2,11 +2,11 @@
 
 use smocap::kinematics::assembly::FrameProblem;
 use smocap::kinematics::synth::{synthesize, SynthOptions};
-use smocap::pipeline::report::trial_report;
+use smocap::pipeline::results::report::trial_report;
 use smocap::pipeline::{calibrate_subject, solve_trial, Context};
 use smocap::solve::{init::cold_start, make_qp, FrameSolver, FrameStatus, QpBackend};
 
-fn run(opt: SynthOptions) -> smocap::pipeline::report::TrialReport {
+fn run(opt: SynthOptions) -> smocap::pipeline::results::report::TrialReport {
     let ctx = Context::shipped().unwrap();
     let s = synthesize(&ctx.model, &ctx.proxy, &opt);
     let cal = calibrate_subject(&ctx, &[("t", &s.trial)]).unwrap();
@@ -292,8 +292,8 @@ fn the_lane_scheduler_on_the_cpu_takes_exactly_the_steps_of_the_per_frame_loop()
         *v = f64::NAN; // a frame with too few markers in the middle
     }
     let cal = calibrate_subject(&ctx, &[("t", &s.trial)]).unwrap();
-    let matched = smocap::pipeline::trial::match_markers(&ctx, "t", &s.trial).unwrap();
-    let obs = smocap::pipeline::trial::observations(&s.trial, &matched.columns);
+    let matched = smocap::pipeline::input::trial::match_markers(&ctx, "t", &s.trial).unwrap();
+    let obs = smocap::pipeline::input::trial::observations(&s.trial, &matched.columns);
     // Trials are solved at the calibrated morphology: the plain loop gets the same pinned scales.
     let plain = plain_loop(&ctx.pinned_to(&cal), &obs, &cal);
     // One lane (one segment): bit-identical, bridged frame aside.

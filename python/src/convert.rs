@@ -103,7 +103,7 @@ pub fn convert<'py>(
     };
     let summary = py.detach(|| -> PyResult<_> {
         let datasets = read_datasets(&config, dataset.as_deref()).map_err(|e| archive_err(&e))?;
-        let (backend, note) = smocap::pipeline::device::settle(choice)
+        let (backend, note) = smocap::pipeline::running::device::settle(choice)
             .map_err(|e| ArchiveError::new_err(format!("backend {backend}: {}", message(&e))))?;
         if let Some(note) = note {
             reporter.send("note", &format!("note: {note}"));

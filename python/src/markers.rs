@@ -7,7 +7,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use smocap::io::markers::{per_metre, units_to_metres};
 use smocap::io::MarkerTrial;
-use smocap::pipeline::convention::{InputConventions, InputOptions, Units, UpAxis};
+use smocap::pipeline::input::convention::{InputConventions, InputOptions, Units, UpAxis};
 use smocap::pipeline::{session, Context};
 use std::path::PathBuf;
 use std::sync::Arc;

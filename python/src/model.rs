@@ -4,7 +4,7 @@
 use crate::errors::{to_py, ModelError};
 use pyo3::prelude::*;
 use smocap::model::CoordinateKind;
-use smocap::pipeline::subject::{prepare_subject_with, SubjectFiles};
+use smocap::pipeline::calibration::subject::{prepare_subject_with, SubjectFiles};
 use smocap::pipeline::Context;
 use std::path::PathBuf;
 use std::sync::Arc;

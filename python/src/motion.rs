@@ -5,7 +5,7 @@ use crate::errors::{to_py, SolveError};
 use numpy::PyArray1;
 use pyo3::prelude::*;
 use smocap::io::MarkerTrial;
-use smocap::pipeline::report::TrialReport;
+use smocap::pipeline::results::report::TrialReport;
 use smocap::pipeline::session::Calibrated;
 use smocap::pipeline::TrialResult;
 use std::path::PathBuf;
@@ -34,7 +34,7 @@ impl Motion {
     fn q<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let ctx = &self.cal.ctx;
         let q = py
-            .detach(|| smocap::pipeline::export::coordinates(ctx, &self.result.proxies))
+            .detach(|| smocap::pipeline::results::export::coordinates(ctx, &self.result.proxies))
             .map_err(to_py::<SolveError>)?;
         let names = ctx.model.coordinates.iter().map(|c| c.name.clone()).collect();
         crate::table(py, q.concat(), names, self.trial.times.clone())
@@ -99,7 +99,7 @@ impl Motion {
     /// Writes the motion as OpenSim's `.mot` (every coordinate, rotations in degrees), byte for
     /// byte as `smocap solve --mot-dir` writes it for the same inputs and settings.
     fn to_mot(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
-        py.detach(|| smocap::pipeline::export::write_mot(&self.cal.ctx, &self.result, &self.trial, &path))
+        py.detach(|| smocap::pipeline::results::export::write_mot(&self.cal.ctx, &self.result, &self.trial, &path))
             .map_err(to_py::<SolveError>)
     }
 

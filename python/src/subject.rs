@@ -9,9 +9,9 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use smocap::model::anthropometry::{Sex, SubjectInfo};
-use smocap::pipeline::device::BackendChoice;
+use smocap::pipeline::calibration::subject::{prepare_subject_with, SetupError, SubjectFiles};
+use smocap::pipeline::running::device::BackendChoice;
 use smocap::pipeline::session::{self, Calibrated};
-use smocap::pipeline::subject::{prepare_subject_with, SetupError, SubjectFiles};
 use smocap::pipeline::Context;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -153,7 +153,7 @@ impl Subject {
     /// Calibrated scale factors `[x, y, z]` of every body, by body name.
     #[getter]
     fn scales(&self) -> PyResult<std::collections::BTreeMap<String, [f64; 3]>> {
-        let s = smocap::pipeline::export::body_scales(&self.cal.ctx, &self.cal.calibration)
+        let s = smocap::pipeline::results::export::body_scales(&self.cal.ctx, &self.cal.calibration)
             .map_err(to_py::<CalibrationError>)?;
         Ok(self.cal.ctx.model.bodies.iter().zip(s).map(|(b, v)| (b.name.clone(), [v.x, v.y, v.z])).collect())
     }
@@ -200,7 +200,7 @@ impl Subject {
     fn write_osim(&self, py: Python<'_>, path: PathBuf) -> PyResult<PathBuf> {
         let (cal, model) = (&self.cal, self.model_file.as_deref());
         let (warnings, set) = py
-            .detach(|| smocap::pipeline::export::write_scaled_model(&cal.ctx, &cal.calibration, model, &path))
+            .detach(|| smocap::pipeline::results::export::write_scaled_model(&cal.ctx, &cal.calibration, model, &path))
             .map_err(to_py::<ModelError>)?;
         // Notes, as the command line prints them (`note: ...`): to the `smocap` logger.
         let log = py.import("logging")?.call_method1("getLogger", ("smocap",))?;
@@ -240,8 +240,9 @@ impl Subject {
                 input.load(&generic).map_err(|e| PyErr::new::<MarkerFileError, _>(message(&e)))?;
             let qc = session::screen_labels(&generic, &name, &mut trial);
             let eval = cal.ctx.evaluator();
-            let mut chosen = smocap::pipeline::device::choose(choice, &eval, smocap::kinematics::gpu::DEFAULT_CAP)
-                .map_err(to_py::<SolveError>)?;
+            let mut chosen =
+                smocap::pipeline::running::device::choose(choice, &eval, smocap::kinematics::gpu::DEFAULT_CAP)
+                    .map_err(to_py::<SolveError>)?;
             let lanes = lanes.unwrap_or_else(|| chosen.default_lanes(threads));
             let mut notes: Vec<String> = chosen.note().map(|n| format!("note: {n}")).into_iter().collect();
             let mut j = session::solve_judged(&cal, &name, &trial, &input, threads, lanes, chosen.backend(), None)

@@ -16,8 +16,8 @@
 //! register = false                  # optional: keep the model's marker positions
 //! ```
 
-use crate::pipeline::convention::{InputOptions, Units, UpAxis};
-use crate::pipeline::subject::SubjectFiles;
+use crate::pipeline::calibration::subject::SubjectFiles;
+use crate::pipeline::input::convention::{InputOptions, Units, UpAxis};
 use crate::solve::QpBackend;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};

@@ -6,7 +6,7 @@ use super::mcap_out::SCALED_MODEL_ATTACHMENT;
 use super::proto;
 use crate::io::sto::{self, StoError};
 use crate::model::Model;
-use crate::pipeline::export::coordinate_table;
+use crate::pipeline::results::export::coordinate_table;
 use prost::Message as _;
 use serde::Deserialize;
 use std::collections::BTreeMap;

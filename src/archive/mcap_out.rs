@@ -2,6 +2,9 @@
 //! see [`super::schemas`]) in zstd chunks, a `smocap.run` metadata record, the settings and the
 //! scaled model attached (zstd-compressed).
 //!
+//! Over 600 lines: the writer is one state machine over the file (channels, chunks, metadata,
+//! attachments, the per-frame messages); cut in two, each half would need the other's state.
+//!
 //! Frames: `world` is Z up (Foxglove's convention); `model` is the model's own frame (the marker
 //! data rotated into it), placed in `world` by one fixed rotation `world_from_model` (identity for
 //! a Z-up model; +90° about x for OpenSim's Y up); each body's frame is given in its parent
@@ -22,7 +25,7 @@ use crate::io::MarkerTrial;
 use crate::kinematics::cpu::{self, Workspace};
 use crate::model::proxy::ProxyKind;
 use crate::model::CoordinateKind;
-use crate::pipeline::label_qc::LabelQc;
+use crate::pipeline::input::label_qc::LabelQc;
 use crate::pipeline::{Context, SolvedFrame};
 use crate::solve::{Calibration, FrameStatus};
 use mcap::records::{MessageHeader, Metadata};

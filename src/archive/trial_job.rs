@@ -11,13 +11,13 @@ use super::config::Dataset;
 use super::mcap_out::{McapOutError, RunInfo, TrialNames, TrialWriter, WriterOptions};
 use crate::io::MarkerFile;
 use crate::kinematics::backend::BatchBackend;
-use crate::pipeline::convention::{conform_trial, decide_conventions, Conform, InputOptions};
-use crate::pipeline::file_frames::FileFrames;
-use crate::pipeline::frames::TrialFrames;
+use crate::pipeline::input::convention::{conform_trial, decide_conventions, Conform, InputOptions};
+use crate::pipeline::input::file_frames::FileFrames;
+use crate::pipeline::input::frames::TrialFrames;
+use crate::pipeline::input::trial::SinkError;
+use crate::pipeline::results::verdict::{Judge, Verdict};
+use crate::pipeline::running::stream::{solve_trials_streaming, TrialStream};
 use crate::pipeline::stats::P50P90;
-use crate::pipeline::stream::{solve_trials_streaming, TrialStream};
-use crate::pipeline::trial::SinkError;
-use crate::pipeline::verdict::{Judge, Verdict};
 use crate::pipeline::{Context, SolvedFrame};
 use crate::solve::Calibration;
 use std::path::Path;
@@ -33,7 +33,7 @@ pub struct Calibrated {
     /// The scaled model (`.osim` text), zstd-compressed ([`compress_model`]) once per subject.
     pub scaled_model: Option<Vec<u8>>,
     /// Why the calibration cannot be trusted ([`crate::solve::Calibration::suspect`], and trials that are not
-    /// one person's, [`crate::pipeline::subject_check::inconsistencies`]): every trial of the
+    /// one person's, [`crate::pipeline::calibration::subject_check::inconsistencies`]): every trial of the
     /// subject is then `suspect`. Empty when it can.
     pub suspect: Vec<String>,
 }
@@ -76,7 +76,7 @@ pub fn open_for(
 ) -> Result<Box<dyn TrialFrames>, String> {
     // Label quality control before anything reads the frames (calibration, solve).
     let name = path.display().to_string();
-    crate::pipeline::label_qc::screened(ctx, &name, open_unscreened(d, ctx, path, input, window)?)
+    crate::pipeline::input::label_qc::screened(ctx, &name, open_unscreened(d, ctx, path, input, window)?)
 }
 
 /// [`open_for`] without label quality control.
@@ -94,7 +94,7 @@ fn open_unscreened(
         if let Some(r) = d.rate {
             t.set_rate(r);
         }
-        if let Some(w) = crate::pipeline::verdict::mask_implausible(&mut t) {
+        if let Some(w) = crate::pipeline::input::trial::mask_implausible(&mut t) {
             t.warnings.push(w);
         }
         return Ok(Box::new(t));
@@ -105,7 +105,7 @@ fn open_unscreened(
     if let Some(r) = d.rate {
         header.set_rate(r);
     }
-    Ok(Box::new(raw.reconform(header, conform, crate::pipeline::verdict::MAX_COORDINATE_M)))
+    Ok(Box::new(raw.reconform(header, conform, crate::pipeline::input::trial::MAX_COORDINATE_M)))
 }
 
 /// What one converted trial yields for the summary.
@@ -115,11 +115,11 @@ pub struct Solved {
     pub ms_per_frame: P50P90,
     pub iterations: P50P90,
     pub rmse_mm: Option<P50P90>,
-    /// Why the result is `suspect` ([`crate::pipeline::verdict`]); recorded in the file's
+    /// Why the result is `suspect` ([`crate::pipeline::results::verdict`]); recorded in the file's
     /// `smocap.run` metadata as `verdict` and `verdict_reason`.
     pub suspect: Option<String>,
     /// Label quality control events (recorded in the file's `smocap.run` as `label_qc`, JSON).
-    pub label_qc: Vec<crate::pipeline::label_qc::LabelEvent>,
+    pub label_qc: Vec<crate::pipeline::input::label_qc::LabelEvent>,
 }
 
 /// Solves `trial` and streams it to `out` (via its `.partial` file); `run` is the `smocap.run`
@@ -163,7 +163,7 @@ struct Collect {
     batch: Vec<SolvedFrame>,
     judge: Judge,
     /// Joint angles against what a person does (flips make the trial suspect).
-    pose: crate::pipeline::plausibility::PoseCheck,
+    pose: crate::pipeline::results::plausibility::PoseCheck,
     ms: Vec<f64>,
     it: Vec<f64>,
     rmse: Vec<f64>,
@@ -195,7 +195,7 @@ impl Collect {
 type Writing<'s, 'w> = std::thread::ScopedJoinHandle<'s, Result<TrialWriter<'w>, (usize, McapOutError)>>;
 
 /// [`solve_and_write`] for several trials of one subject solved together
-/// ([`crate::pipeline::stream::solve_trials_streaming`]: their segments share the lanes, so
+/// ([`crate::pipeline::running::stream::solve_trials_streaming`]: their segments share the lanes, so
 /// that short trials fill a batch of a device backend together); one writer thread per trial.
 /// Each trial's file is the same as when it is solved alone. One result per trial, in order.
 pub fn solve_and_write_all(
@@ -218,7 +218,7 @@ pub fn solve_and_write_all(
                         tx: Some(tx),
                         batch: Vec::with_capacity(BATCH_FRAMES),
                         judge: Judge::default(),
-                        pose: crate::pipeline::plausibility::PoseCheck::new(ctx),
+                        pose: crate::pipeline::results::plausibility::PoseCheck::new(ctx),
                         ms: Vec::with_capacity(n),
                         it: Vec::with_capacity(n),
                         rmse: Vec::with_capacity(n),

@@ -16,8 +16,8 @@ pub struct BenchTableArgs {
     #[arg(long)]
     pub dataset: Option<String>,
     /// Evaluation backend: `auto` uses wgpu only on a real GPU.
-    #[arg(long, value_enum, default_value_t = crate::pipeline::device::BackendChoice::Auto)]
-    pub backend: crate::pipeline::device::BackendChoice,
+    #[arg(long, value_enum, default_value_t = crate::pipeline::running::device::BackendChoice::Auto)]
+    pub backend: crate::pipeline::running::device::BackendChoice,
     /// Worker threads per trial (1, the default, is the published single-thread setting).
     #[arg(long, default_value_t = 1)]
     pub threads: usize,

@@ -68,8 +68,8 @@ pub struct ConvertArgs {
     /// parallel); `wgpu` / `wgpu-f64` (a device backend per subject, its trials solved in
     /// batches whose segments share the lanes); `auto`: wgpu only on a real GPU, else the CPU
     /// backend with a note. `wgpu` without an adapter is an error before any work.
-    #[arg(long, value_enum, default_value_t = crate::pipeline::device::BackendChoice::Cpu)]
-    pub backend: crate::pipeline::device::BackendChoice,
+    #[arg(long, value_enum, default_value_t = crate::pipeline::running::device::BackendChoice::Cpu)]
+    pub backend: crate::pipeline::running::device::BackendChoice,
     /// Lanes of the scheduler (segments in flight) of a subject's trials solved in batches:
     /// default 4096 on wgpu; given with the CPU backend, trials are solved in batches too. The
     /// lane count changes the speed, not the result.
@@ -80,7 +80,7 @@ pub struct ConvertArgs {
     /// `off`; overrides the datasets' `[settings] label_qc`. Events go into each file's
     /// `smocap.run` metadata and the summary.
     #[arg(long, value_enum)]
-    pub label_qc: Option<crate::pipeline::label_qc::QcMode>,
+    pub label_qc: Option<crate::pipeline::input::label_qc::QcMode>,
 }
 
 fn parse_epoch(s: &str) -> Result<u64, String> {
@@ -97,7 +97,7 @@ pub fn run(a: ConvertArgs) -> anyhow::Result<u8> {
         anyhow::ensure!((1..=1 << 20).contains(&l), "--lanes {l}: expected 1 to {}", 1 << 20);
     }
     // Settled once for the run (each subject then builds its own backend).
-    let (backend, note) = crate::pipeline::device::settle(a.backend).map_err(|e| {
+    let (backend, note) = crate::pipeline::running::device::settle(a.backend).map_err(|e| {
         anyhow::anyhow!(
             "--backend {}: {e}",
             a.backend.to_possible_value().map_or("?".into(), |v| v.get_name().to_string())

@@ -1,7 +1,7 @@
 //! `smocap demo`: the whole path on the embedded default (shipped model, synthetic trial).
 
 use crate::kinematics::synth::{synthesize, SynthOptions};
-use crate::pipeline::report::{trial_report, Report};
+use crate::pipeline::results::report::{trial_report, Report};
 use crate::pipeline::{calibrate_subject, solve_trial_with, Context};
 use clap::Args;
 

@@ -154,7 +154,7 @@ pub(crate) fn load_context_with_markers(
     marker_set: Option<&std::path::Path>,
     profile: Option<&std::path::Path>,
 ) -> anyhow::Result<crate::pipeline::Context> {
-    let ctx = crate::pipeline::subject::load_context(model, marker_set, profile)?;
+    let ctx = crate::pipeline::calibration::subject::load_context(model, marker_set, profile)?;
     if model.is_some() {
         for w in &ctx.warnings {
             eprintln!("warning: {w}");
@@ -168,8 +168,8 @@ pub(crate) fn load_context_with_markers(
 pub struct BackendArgs {
     /// Evaluation backend: `auto` uses wgpu only on a real (discrete or integrated) GPU;
     /// `wgpu-f64` runs the shaders in f64 (adapters offering SHADER_F64).
-    #[arg(long, value_enum, default_value_t = crate::pipeline::device::BackendChoice::Auto)]
-    pub backend: crate::pipeline::device::BackendChoice,
+    #[arg(long, value_enum, default_value_t = crate::pipeline::running::device::BackendChoice::Auto)]
+    pub backend: crate::pipeline::running::device::BackendChoice,
     /// Lanes of the scheduler (segments in flight); default: the thread count on the CPU
     /// backend, 4096 on wgpu. A trial of n frames is cut into max(1, n / 200) segments (each
     /// walked from 10 frames before its start), whatever the lane and thread counts: they change
@@ -184,8 +184,8 @@ impl BackendArgs {
         &self,
         ctx: &crate::pipeline::Context,
         threads: usize,
-    ) -> anyhow::Result<(crate::pipeline::device::Chosen, usize)> {
-        use crate::pipeline::device::choose;
+    ) -> anyhow::Result<(crate::pipeline::running::device::Chosen, usize)> {
+        use crate::pipeline::running::device::choose;
         let chosen = choose(self.backend, &ctx.evaluator(), crate::kinematics::gpu::DEFAULT_CAP)?;
         if let Some(note) = chosen.note() {
             eprintln!("note: {note}");

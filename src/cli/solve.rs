@@ -1,9 +1,9 @@
 //! `smocap solve`: calibrate a subject, then solve its trials.
 
 use crate::kinematics::synth::Truth;
-use crate::pipeline::report::Report;
+use crate::pipeline::calibration::subject::{prepare_subject, Subject, SubjectFiles};
+use crate::pipeline::results::report::Report;
 use crate::pipeline::session;
-use crate::pipeline::subject::{prepare_subject, Subject, SubjectFiles};
 use crate::solve::QpBackend;
 use anyhow::Context as _;
 use clap::Args;
@@ -71,10 +71,10 @@ pub struct SolveArgs {
     pub ik_setup: Option<PathBuf>,
     /// The marker data's up axis (detected when absent); the data are rotated into the model's.
     #[arg(long, value_enum)]
-    pub up: Option<crate::pipeline::convention::UpAxis>,
+    pub up: Option<crate::pipeline::input::convention::UpAxis>,
     /// Length units of the marker files, overriding their headers.
     #[arg(long, value_enum)]
-    pub units: Option<crate::pipeline::convention::Units>,
+    pub units: Option<crate::pipeline::input::convention::Units>,
     /// Write each solved trial's coordinates as an OpenSim motion `<trial stem>.mot` into this
     /// directory (rotations in degrees, translations in metres).
     #[arg(long)]
@@ -107,7 +107,7 @@ pub struct SolveArgs {
     /// swapped labels back and masks what cannot be repaired. Overrides the profile's
     /// `label_qc.mode`.
     #[arg(long, value_enum)]
-    pub label_qc: Option<crate::pipeline::label_qc::QcMode>,
+    pub label_qc: Option<crate::pipeline::input::label_qc::QcMode>,
     #[command(flatten)]
     pub backend: super::BackendArgs,
 }
@@ -116,8 +116,8 @@ pub struct SolveArgs {
 fn read_trial(
     ctx: &crate::pipeline::Context,
     path: &std::path::Path,
-    opt: &crate::pipeline::convention::InputOptions,
-) -> anyhow::Result<(crate::io::MarkerTrial, crate::pipeline::convention::InputConventions)> {
+    opt: &crate::pipeline::input::convention::InputOptions,
+) -> anyhow::Result<(crate::io::MarkerTrial, crate::pipeline::input::convention::InputConventions)> {
     let (t, conv) = session::read_input(ctx, path, opt)?;
     eprintln!("{}: {}", path.display(), conv.summary());
     for w in t.warnings.iter().filter(|w| w.contains("masked as gaps")) {
@@ -183,13 +183,13 @@ pub fn run(a: SolveArgs) -> anyhow::Result<u8> {
     // and whether the trials are one person.
     let mut paths: Vec<&std::path::Path> = a.trials.iter().map(|p| p.as_path()).collect();
     paths.extend(static_path.as_deref());
-    let records = crate::pipeline::subject_check::subject_records(&paths);
-    let subject_note = crate::pipeline::subject_check::fill_from_records(&mut ctx.subject, &records);
+    let records = crate::pipeline::calibration::subject_check::subject_records(&paths);
+    let subject_note = crate::pipeline::calibration::subject_check::fill_from_records(&mut ctx.subject, &records);
     if let Some(n) = &subject_note {
         eprintln!("{n}");
     }
-    let not_one_person = crate::pipeline::subject_check::inconsistencies(&records);
-    let input_opt = crate::pipeline::convention::InputOptions { up: a.up, units: a.units };
+    let not_one_person = crate::pipeline::calibration::subject_check::inconsistencies(&records);
+    let input_opt = crate::pipeline::input::convention::InputOptions { up: a.up, units: a.units };
     if let Some(t) = a.threads {
         anyhow::ensure!((1..=4096).contains(&t), "--threads {t}: expected 1 to 4096 threads");
     }
@@ -346,7 +346,7 @@ fn export(
     solved: &[(&crate::io::MarkerTrial, crate::pipeline::TrialResult)],
     calibration: Option<&crate::solve::Calibration>,
 ) -> anyhow::Result<()> {
-    use crate::pipeline::export::{write_mot, write_scaled_model};
+    use crate::pipeline::results::export::{write_mot, write_scaled_model};
     if let Some(dir) = &a.mot_dir {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         let mut written = std::collections::HashSet::new();

@@ -24,8 +24,8 @@ pub mod subjects;
 
 pub use real::{audit_real, RealAudit};
 
+use crate::model::math::wrap_angle;
 use crate::pipeline::{calibrate_subject, solve_trial, Context, TrialError, TrialResult};
-use crate::solve::init::wrap_angle;
 use crate::solve::FrameStatus;
 use breakdown::{driven_coordinates, scale_proxies, Breakdown, Detail};
 use rayon::prelude::*;

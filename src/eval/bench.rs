@@ -19,9 +19,9 @@ pub use figure::{write_figure, FigureError};
 
 use crate::archive::config::Dataset;
 use crate::archive::discover::{discover, SubjectGroup};
-use crate::pipeline::device::{choose, BackendChoice, Chosen};
+use crate::pipeline::calibration::subject::{calibrate_placed_with, prepare_subject, read_trial};
+use crate::pipeline::running::device::{choose, BackendChoice, Chosen};
 use crate::pipeline::stats::{percentile, P50P90};
-use crate::pipeline::subject::{calibrate_placed_with, prepare_subject, read_trial};
 use crate::pipeline::{solve_trial_with, Context};
 use crate::solve::FrameStatus;
 use serde::{Deserialize, Serialize};

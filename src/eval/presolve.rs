@@ -13,7 +13,7 @@
 use super::hard::{base, hard_set, HardCase};
 use crate::kinematics::assembly::FrameProblem;
 use crate::model::proxy::ProxyKind;
-use crate::pipeline::trial::observations;
+use crate::pipeline::input::trial::observations;
 use crate::pipeline::{calibrate_subject, solve_trial_with, Context};
 use crate::solve::presolve::outlier_threshold;
 use crate::solve::{make_qp, Calibration, FrameSolver, FrameStats, FrameStatus, Presolve, Presolver};
@@ -130,7 +130,7 @@ fn solve_case(ctx: &Context, case: &HardCase, cal: &Calibration) -> anyhow::Resu
         .iter()
         .map(|&f| {
             rot.iter()
-                .map(|&k| crate::solve::init::wrap_angle(proxies[f][k] - case.truth[f][k]).abs().to_degrees())
+                .map(|&k| crate::model::math::wrap_angle(proxies[f][k] - case.truth[f][k]).abs().to_degrees())
                 .fold(0.0, f64::max)
         })
         .collect();

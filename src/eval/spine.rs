@@ -14,7 +14,7 @@ use crate::kinematics::synth::{synthesize_with, SynthOptions, Synthetic};
 use crate::model::profile::{Coupling, Profile};
 use crate::model::proxy::ProxyKind;
 use crate::pipeline::context::{SHIPPED_MODEL, SHIPPED_PROFILE};
-use crate::pipeline::report::{trial_report, PoseError, ScaleError};
+use crate::pipeline::results::report::{trial_report, PoseError, ScaleError};
 use crate::pipeline::stats::{MeanP50P90, P50P90};
 use crate::pipeline::{calibrate_subject, solve_trial_with, Context};
 use rand::{RngExt, SeedableRng};

@@ -9,8 +9,13 @@
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 
+mod cells;
+mod write;
+
 use super::decimal::parse_f64;
 use super::markers::{per_metre, units_to_metres, MarkerTrial};
+use cells::{cell_spans, cells, clip, header_pairs, labels_of, parse_frame, Cells};
+pub use write::{to_trc_string, write_trc};
 
 /// Why a TRC file could not be read or written. `line` is 1-based.
 #[derive(Debug, thiserror::Error)]
@@ -162,134 +167,6 @@ impl TrcRows {
         }
         Ok(p.trial.positions)
     }
-}
-
-/// At most 40 characters of `s`, for error messages.
-fn clip(s: &str) -> String {
-    match s.char_indices().nth(40) {
-        Some((i, _)) => format!("{}...", &s[..i]),
-        None => s.to_string(),
-    }
-}
-
-/// Splits a row into cells: on tabs when it has any, else on runs of whitespace.
-fn cells(line: &str) -> Vec<&str> {
-    if line.contains('\t') {
-        line.split('\t').map(str::trim).collect()
-    } else {
-        line.split_whitespace().collect()
-    }
-}
-
-/// [`cells`] of `line` as byte ranges into it, into `out` (reused: no allocation per row).
-/// ASCII lines are split on bytes (the same cells: on ASCII, `char::is_whitespace` is
-/// [`is_space`]); others go through [`cells`].
-fn cell_spans(line: &str, out: &mut Vec<(usize, usize)>) {
-    out.clear();
-    if !line.is_ascii() {
-        let base = line.as_ptr() as usize;
-        out.extend(cells(line).iter().map(|c| {
-            let a = c.as_ptr() as usize - base;
-            (a, a + c.len())
-        }));
-        return;
-    }
-    let b = line.as_bytes();
-    if b.contains(&b'\t') {
-        let mut a = 0;
-        loop {
-            let end = b[a..].iter().position(|&c| c == b'\t').map_or(b.len(), |k| a + k);
-            let (mut x, mut y) = (a, end);
-            while x < y && is_space(b[x]) {
-                x += 1;
-            }
-            while y > x && is_space(b[y - 1]) {
-                y -= 1;
-            }
-            out.push((x, y));
-            if end == b.len() {
-                break;
-            }
-            a = end + 1;
-        }
-    } else {
-        let mut k = 0;
-        while k < b.len() {
-            while k < b.len() && is_space(b[k]) {
-                k += 1;
-            }
-            let x = k;
-            while k < b.len() && !is_space(b[k]) {
-                k += 1;
-            }
-            if k > x {
-                out.push((x, k));
-            }
-        }
-    }
-}
-
-/// A row's cells: `spans` into `row`.
-struct Cells<'a> {
-    row: &'a str,
-    spans: &'a [(usize, usize)],
-}
-
-impl<'a> Cells<'a> {
-    fn len(&self) -> usize {
-        self.spans.len()
-    }
-
-    fn get(&self, i: usize) -> Option<&'a str> {
-        self.spans.get(i).map(|&(a, b)| &self.row[a..b])
-    }
-}
-
-/// `char::is_whitespace` on an ASCII byte (tab, line feed, vertical tab, form feed, carriage
-/// return, space).
-fn is_space(c: u8) -> bool {
-    matches!(c, b'\t' | b'\n' | 0x0B | 0x0C | b'\r' | b' ')
-}
-
-/// Header name/value pairs of lines 2 and 3, tolerant of doubled tabs.
-fn header_pairs(names_line: &str, values_line: &str, warnings: &mut Vec<String>) -> Vec<(String, String)> {
-    let names: Vec<&str> = names_line.split('\t').flat_map(str::split_whitespace).collect();
-    let by_tab: Vec<&str> = values_line.trim_end().split('\t').map(str::trim).collect();
-    let values: Vec<&str> = if by_tab.len() == names.len() { by_tab } else { values_line.split_whitespace().collect() };
-    if values.len() != names.len() {
-        warnings.push(format!("header has {} field names but {} values", names.len(), values.len()));
-    }
-    names.iter().zip(values).map(|(n, v)| (n.to_string(), v.to_string())).collect()
-}
-
-/// Marker labels of line 4: at columns 2, 5, 8, ... (0-based), each followed by two
-/// empty cells; labels off that grid are taken in order with a warning.
-fn labels_of(line: &str, warnings: &mut Vec<String>) -> Vec<String> {
-    let c = cells(line.trim_end());
-    let named: Vec<(usize, &str)> =
-        c.iter().enumerate().skip(2).filter(|(_, s)| !s.is_empty()).map(|(i, s)| (i, *s)).collect();
-    if named.iter().any(|(i, _)| (i - 2) % 3 != 0) {
-        warnings.push("marker labels are not each followed by two empty cells; taken in order".into());
-        return named.iter().map(|(_, s)| s.to_string()).collect();
-    }
-    let n = c.len().saturating_sub(2).div_ceil(3);
-    (0..n)
-        .map(|m| match c.get(2 + 3 * m).copied().filter(|s| !s.is_empty()) {
-            Some(s) => s.to_string(),
-            None => {
-                warnings.push(format!("marker {} has no label; named Unnamed{}", m + 1, m + 1));
-                format!("Unnamed{}", m + 1)
-            }
-        })
-        .collect()
-}
-
-/// Parses a whole-number frame cell (`12` or `12.0`).
-fn parse_frame(s: &str) -> Option<i64> {
-    s.parse::<i64>().ok().or_else(|| {
-        let v: f64 = s.parse().ok()?;
-        (v.is_finite() && v.fract() == 0.0 && v.abs() < 9.0e15).then_some(v as i64)
-    })
 }
 
 /// Parses TRC text; `name_for_errors` names the source in errors. Positions in metres.
@@ -622,74 +499,4 @@ fn widen_to(trial: &mut MarkerTrial, nm: usize, frames: usize) {
         }
         trial.positions = wide;
     }
-}
-
-/// Writes `trial` as a TRC file with positions in `units` (mm, cm, m, in).
-pub fn write_trc(path: &Path, trial: &MarkerTrial, units: &str) -> Result<(), TrcError> {
-    let file = path.display().to_string();
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let text = to_trc_string(trial, units, &name).map_err(|e| match e {
-        TrcError::Unwritable { what, .. } => TrcError::Unwritable { file: file.clone(), what },
-        other => other,
-    })?;
-    std::fs::write(path, text).map_err(|source| TrcError::Io { file, source })
-}
-
-/// The TRC text for `trial` with positions in `units`; `name` goes on line 1.
-/// Positions carry 9 significant decimals of a metre (6 in mm, 9 in m); times 6
-/// decimals; gaps (any non-finite axis) are written as empty cells.
-pub fn to_trc_string(trial: &MarkerTrial, units: &str, name: &str) -> Result<String, TrcError> {
-    use std::fmt::Write as _;
-    let bad = |what: String| TrcError::Unwritable { file: name.to_string(), what };
-    let scale = units_to_metres(units).ok_or_else(|| bad(format!("unknown units {units:?}")))?;
-    trial.check_consistent().map_err(bad)?;
-    if let Some(l) =
-        trial.labels.iter().find(|l| l.is_empty() || l.trim() != l.as_str() || l.contains(['\t', '\n', '\r']))
-    {
-        return Err(bad(format!("marker label {l:?} is empty or has tabs, line breaks or edge spaces")));
-    }
-    if trial.times.is_empty() {
-        return Err(bad("trial has no frames".into()));
-    }
-    if let Some(t) = trial.times.iter().find(|t| !t.is_finite()) {
-        return Err(bad(format!("time {t} is not finite")));
-    }
-    let units = units.trim();
-    let per_m = per_metre(scale);
-    let decimals = (9.0 + scale.log10() - 1e-9).ceil().clamp(0.0, 12.0) as usize;
-    let (nf, nm) = (trial.n_frames(), trial.n_markers());
-    let first_frame = trial.frame_numbers.first().copied().unwrap_or(1);
-    let rate = trial.rate_hz;
-    let mut s = String::new();
-    // Writing into a String cannot fail; the results are ignored.
-    let _ = writeln!(s, "PathFileType\t4\t(X/Y/Z)\t{name}");
-    let _ = writeln!(
-        s,
-        "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames"
-    );
-    let _ = writeln!(s, "{rate}\t{rate}\t{nf}\t{nm}\t{units}\t{rate}\t{first_frame}\t{nf}");
-    s.push_str("Frame#\tTime");
-    for l in &trial.labels {
-        let _ = write!(s, "\t{l}\t\t");
-    }
-    s.push_str("\n\t");
-    for m in 1..=nm {
-        let _ = write!(s, "\tX{m}\tY{m}\tZ{m}");
-    }
-    s.push_str("\n\n");
-    for f in 0..nf {
-        let _ = write!(s, "{}\t{:.6}", trial.frame_numbers[f], trial.times[f]);
-        for m in 0..nm {
-            match trial.position(f, m) {
-                Some(p) => {
-                    for v in p {
-                        let _ = write!(s, "\t{:.*}", decimals, v * per_m);
-                    }
-                }
-                None => s.push_str("\t\t\t"),
-            }
-        }
-        s.push('\n');
-    }
-    Ok(s)
 }

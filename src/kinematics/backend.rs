@@ -1,5 +1,5 @@
 //! Batched evaluation behind one trait: the same batch of frames in, the same `(H, g, E, x̂)` out,
-//! whichever backend ran it. The solver and the lane scheduler ([`crate::pipeline::lanes`]) only
+//! whichever backend ran it. The solver and the lane scheduler ([`crate::pipeline::running::lanes`]) only
 //! see [`BatchBackend`]; [`CpuBackend`] (rayon, f64, the reference) and
 //! [`WgpuBackend`](super::wgpu::WgpuBackend) (compute shaders, f32) implement it.
 

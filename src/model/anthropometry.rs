@@ -189,8 +189,8 @@ impl Survey {
                 l[(i, c)] += w;
             }
         }
-        // Fixed-order products: the same bits on every CPU (`crate::solve::fixed`).
-        use crate::solve::fixed::{mul, mul_t, mul_v};
+        // Fixed-order products: the same bits on every CPU (`crate::model::fixed`).
+        use crate::model::fixed::{mul, mul_t, mul_v};
         let mut mean = mul_v(&l, &mu);
         let mut cov = mul_t(&mul(&l, &sigma), &l);
         if !known.is_empty() {

@@ -166,3 +166,13 @@ mod tests {
         }
     }
 }
+
+/// The angle equal to `a` modulo 2π in (−π, π].
+pub fn wrap_angle(a: f64) -> f64 {
+    let w = (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+    if w == -std::f64::consts::PI {
+        std::f64::consts::PI
+    } else {
+        w
+    }
+}

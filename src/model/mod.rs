@@ -15,6 +15,7 @@
 //!   body-major (`s[3b + axis]`).
 
 pub mod anthropometry;
+pub mod fixed;
 pub mod function;
 pub mod math;
 pub mod profile;

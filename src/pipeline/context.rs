@@ -196,7 +196,7 @@ impl Context {
         if moves.is_empty() {
             return self.clone();
         }
-        Context { model: super::joint_centres::with_joint_moves(&self.model, moves), ..self.clone() }
+        Context { model: with_joint_moves(&self.model, moves), ..self.clone() }
     }
 
     /// The subject as its trials are solved: the calibration's morphology (scale proxies pinned
@@ -313,17 +313,19 @@ impl Context {
         crate::model::marker_classes(&self.model, &self.profile.markers.tracking, &self.profile.markers.anatomical)
     }
 
-    /// The marker-name synonyms: the built-in table plus the profile's `[markers] synonyms`.
-    pub fn synonyms(&self) -> super::matching::Synonyms {
-        let mut s = super::matching::Synonyms::default();
-        for g in &self.profile.markers.synonyms {
-            s.add_group(g.iter().map(String::as_str));
-        }
-        s
-    }
-
     /// Evaluator over this context's model and proxy map.
     pub fn evaluator(&self) -> Evaluator<'_> {
         Evaluator::new(&self.model, &self.proxy)
     }
+}
+
+/// `model` with the joints of `moves` at their new locations.
+pub fn with_joint_moves(model: &Model, moves: &[crate::solve::prior::JointMove]) -> Model {
+    let mut m = model.clone();
+    for mv in moves {
+        if let Some(b) = m.body_index(&mv.body) {
+            m.bodies[b].joint.parent_offset.translation.vector = nalgebra::Vector3::from(mv.location_m);
+        }
+    }
+    m
 }

@@ -5,15 +5,18 @@
 //! solved and judged ([`solve_judged`]): a non-finite result or no solvable frame fails it, most
 //! frames at the iteration cap or a suspect calibration make it `suspect`.
 
-use super::convention::{conform_trial, InputConventions, InputOptions};
-use super::label_qc::LabelQc;
-use super::report::{trial_report, CalibrationReport, TrialReport};
-use super::subject::{calibrate_placed_with, SetupError};
-use super::verdict::{mask_implausible, Judge, Verdict};
-use super::{solve_trial_with, Context, TrialResult};
 use crate::io::{MarkerFileError, MarkerTrial};
 use crate::kinematics::backend::BatchBackend;
 use crate::kinematics::synth::Truth;
+use crate::pipeline::calibration::subject::{calibrate_placed_with, SetupError};
+use crate::pipeline::context::Context;
+use crate::pipeline::input::convention::{conform_trial, InputConventions, InputOptions};
+use crate::pipeline::input::label_qc::LabelQc;
+use crate::pipeline::input::trial::mask_implausible;
+use crate::pipeline::results::report::{trial_report, CalibrationReport, TrialReport};
+use crate::pipeline::results::verdict::{Judge, Verdict};
+use crate::pipeline::running::stream::solve_trial_with;
+use crate::pipeline::running::trial::TrialResult;
 use crate::solve::Calibration;
 use std::path::Path;
 
@@ -58,7 +61,7 @@ pub struct Calibrated {
     pub calibration: Calibration,
     pub report: CalibrationReport,
     /// Why the trials calibrated together are not one person
-    /// ([`super::subject_check::inconsistencies`]); empty when nothing says so.
+    /// ([`crate::pipeline::calibration::subject_check::inconsistencies`]); empty when nothing says so.
     pub subject_suspect: Vec<String>,
 }
 
@@ -158,14 +161,14 @@ pub fn solve_judged(
 }
 
 /// Screens the labels of `trial` (held whole, in the model's conventions) as
-/// `ctx.settings.label_qc` says, repairing and masking in place ([`super::label_qc`]); `None`
+/// `ctx.settings.label_qc` says, repairing and masking in place ([`crate::pipeline::input::label_qc`]); `None`
 /// when its markers do not match the model's (solving it then says why) or screening is off.
 pub fn screen_labels(ctx: &Context, name: &str, trial: &mut MarkerTrial) -> Option<LabelQc> {
-    if ctx.settings.label_qc.mode == super::label_qc::QcMode::Off {
+    if ctx.settings.label_qc.mode == crate::pipeline::input::label_qc::QcMode::Off {
         return None;
     }
-    let matched = super::trial::match_markers(ctx, name, trial).ok()?;
-    super::label_qc::screen_in_place(ctx, trial, &matched.columns).ok()
+    let matched = crate::pipeline::input::trial::match_markers(ctx, name, trial).ok()?;
+    crate::pipeline::input::label_qc::screen_in_place(ctx, trial, &matched.columns).ok()
 }
 
 /// Puts a trial's label QC into its report entry: its events as notes, and the trial `suspect`
@@ -185,7 +188,7 @@ pub fn attach_label_qc(j: &mut JudgedTrial, qc: Option<LabelQc>) {
     j.report.label_qc = Some(qc);
 }
 
-/// The verdict on a solved trial ([`super::verdict`]).
+/// The verdict on a solved trial ([`crate::pipeline::results::verdict`]).
 pub fn judge(r: &TrialResult) -> Verdict {
     let mut j = Judge::default();
     for (f, (p, st)) in r.proxies.iter().zip(&r.stats).enumerate() {

@@ -118,7 +118,7 @@ impl Take {
         let mut dphi = vec![0.0; ctx.proxy.terms.len()];
         ctx.proxy.apply(&result.calibration.proxies, &mut y, &mut dphi);
         let scales = y[nq..nq + 3 * nb].to_vec();
-        let cols = crate::pipeline::trial::match_markers(ctx, &result.name, trial)
+        let cols = crate::pipeline::input::trial::match_markers(ctx, &result.name, trial)
             .map_err(|e| RenderError::Content { file: result.name.clone(), what: e.to_string() })?
             .columns;
         let t0 = trial.times.first().copied().unwrap_or(0.0);

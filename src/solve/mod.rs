@@ -3,17 +3,20 @@
 //! ([`calibrate`]).
 
 pub mod calibrate;
-pub mod fixed;
+pub mod calibration;
 pub mod init;
+pub mod joint;
 pub mod placement;
 pub mod presolve;
 pub mod prior;
 pub mod qp;
+pub mod root;
 mod schur;
 pub mod settings;
 pub mod trqp;
 
-pub use calibrate::{calibrate, Calibration};
+pub use calibrate::calibrate;
+pub use calibration::{Calibration, StageCost};
 pub use presolve::Presolver;
 pub use settings::{FunctionalHips, Presolve, QpBackend, SolverSettings, StaticArms, WarmStart};
 pub use trqp::{FrameSolver, FrameStats, FrameStatus};

@@ -11,7 +11,7 @@
 //! columns only, projected onto the step box and the proxy ranges; a step is kept only when it
 //! lowers the local objective. All scratch lives in [`Presolver`]: no allocation per iteration.
 
-use super::init::place_root;
+use super::root::place_root;
 use super::settings::SolverSettings;
 use super::trqp::FrameSolver;
 use crate::kinematics::assembly::{Evaluator, FrameProblem};

@@ -187,7 +187,7 @@ impl GlobalTerm for Anthropometric {
         let n = self.dims.len();
         let v = DVector::from_vec(self.survey_values(x.p));
         let r = &v - &self.mean;
-        let e = 0.5 * self.weight * r.dot(&super::fixed::mul_v(&self.cov_inv, &r));
+        let e = 0.5 * self.weight * r.dot(&crate::model::fixed::mul_v(&self.cov_inv, &r));
         if let Some((h, g)) = hg {
             let ns = x.scale.len();
             let mut jac = DMatrix::zeros(n, ns);
@@ -205,9 +205,9 @@ impl GlobalTerm for Anthropometric {
                 }
             }
             // Fixed-order products: the same bits on every CPU (`super::fixed`).
-            let jt_ci = super::fixed::t_mul(&jac, &self.cov_inv) * self.weight;
-            let hh = super::fixed::mul(&jt_ci, &jac);
-            let gg = super::fixed::mul_v(&jt_ci, &r);
+            let jt_ci = crate::model::fixed::t_mul(&jac, &self.cov_inv) * self.weight;
+            let hh = crate::model::fixed::mul(&jt_ci, &jac);
+            let gg = crate::model::fixed::mul_v(&jt_ci, &r);
             for i in 0..ns {
                 g[i] += gg[i];
                 for j in 0..ns {
@@ -528,7 +528,7 @@ pub struct RegistrationReport {
 }
 
 /// A joint that calibration moved to where the motion says it is (`functional_hips = "apply"`,
-/// [`crate::pipeline::joint_centres`]).
+/// [`crate::pipeline::calibration::joint_centres`]).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct JointMove {
     /// The body whose joint moved (a child of the root: a femur).
@@ -548,7 +548,7 @@ pub struct JointMove {
 }
 
 /// A joint's centre found from the motion against the calibrated model's
-/// ([`crate::pipeline::joint_centres`]).
+/// ([`crate::pipeline::calibration::joint_centres`]).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct FunctionalCentre {
     /// The body whose joint it is (a child of the root: a femur).

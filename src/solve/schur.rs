@@ -9,10 +9,10 @@
 //! eliminated in parallel in fixed pieces whose sums are added in piece order, so the result
 //! does not depend on the thread count (docs/CALIBRATION.md, "The solver").
 
-use super::calibrate::{JointProblem, JointState};
-use super::fixed;
+use super::joint::{JointProblem, JointState};
 use super::prior::Globals;
 use crate::kinematics::assembly::{EvalWorkspace, Evaluator, FrameProblem};
+use crate::model::fixed;
 use crate::model::proxy::ProxyKind;
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 

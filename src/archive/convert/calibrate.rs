@@ -7,9 +7,9 @@ use super::ConvertOptions;
 use crate::archive::config::Dataset;
 use crate::archive::discover::SubjectGroup;
 use crate::archive::trial_job::{open_for, Calibrated};
-use crate::pipeline::convention::InputOptions;
-use crate::pipeline::frames::TrialFrames;
-use crate::pipeline::subject::prepare_subject;
+use crate::pipeline::calibration::subject::prepare_subject;
+use crate::pipeline::input::convention::InputOptions;
+use crate::pipeline::input::frames::TrialFrames;
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -39,11 +39,11 @@ pub(super) fn calibrate(
     // What C3D files say of their subject (as `solve`): the prior's height and mass where the
     // dataset gives none, and whether the subject's trials (done ones too) are one person.
     let paths: Vec<&Path> = g.trials.iter().map(|t| t.path.as_path()).chain(sub.static_path.as_deref()).collect();
-    let records = crate::pipeline::subject_check::subject_records(&paths);
-    if let Some(n) = crate::pipeline::subject_check::fill_from_records(&mut sub.ctx.subject, &records) {
+    let records = crate::pipeline::calibration::subject_check::subject_records(&paths);
+    if let Some(n) = crate::pipeline::calibration::subject_check::fill_from_records(&mut sub.ctx.subject, &records) {
         log(&format!("note: {}/{}: {n}", d.name, g.subject));
     }
-    let mut not_one_person = crate::pipeline::subject_check::inconsistencies(&records);
+    let mut not_one_person = crate::pipeline::calibration::subject_check::inconsistencies(&records);
     if !d.settings.is_empty() {
         match sub.ctx.settings.with_overrides(&d.settings) {
             Ok(s) => sub.ctx.settings = s,
@@ -84,7 +84,7 @@ pub(super) fn calibrate(
     let motions: Vec<(&str, &dyn TrialFrames)> = opened
         .iter()
         .filter(|(rel, m)| {
-            crate::pipeline::trial::match_markers(&sub.ctx, rel, m.header())
+            crate::pipeline::input::trial::match_markers(&sub.ctx, rel, m.header())
                 .is_ok_and(|x| x.columns.iter().any(Option::is_some))
         })
         .map(|(n, t)| (n.as_str(), t.as_ref()))
@@ -93,7 +93,7 @@ pub(super) fn calibrate(
         Err("no trial to calibrate on".to_string())
     } else {
         let s: Vec<(&str, &dyn TrialFrames)> = statics.iter().map(|(n, t)| (n.as_str(), t.as_ref())).collect();
-        crate::pipeline::subject::calibrate_placed_with(&sub.ctx, &s, &motions)
+        crate::pipeline::calibration::subject::calibrate_placed_with(&sub.ctx, &s, &motions)
             .map_err(|e| format!("calibration failed: {e}"))
     };
     drop((statics, motions));
@@ -103,7 +103,7 @@ pub(super) fn calibrate(
     let source = d.model.as_ref().filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("osim")));
     let text = source.and_then(|p| std::fs::read_to_string(p).ok());
     let name = source.map(|p| p.display().to_string()).unwrap_or_default();
-    let scaled_model = crate::pipeline::export::scaled_osim(
+    let scaled_model = crate::pipeline::results::export::scaled_osim(
         ctx,
         &calibration,
         text.as_deref().map(|t| (t, name.as_str())),

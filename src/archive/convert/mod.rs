@@ -33,7 +33,7 @@ use crate::archive::config::Dataset;
 use crate::archive::discover::{SubjectGroup, TrialEntry};
 use crate::archive::mcap_out::{partial_path, WriterOptions};
 use crate::archive::shard::{assign, Shard};
-use crate::pipeline::device::BackendChoice;
+use crate::pipeline::running::device::BackendChoice;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -55,8 +55,8 @@ pub struct ConvertOptions {
     /// [`crate::archive::trial_job::WINDOW_FRAMES`]); shorter ones are held whole. Results do not depend
     /// on it.
     pub window_frames: usize,
-    /// Evaluation backend. `auto` is taken per subject as [`crate::pipeline::device::choose`]
-    /// does; settle it before ([`crate::pipeline::device::settle`]) to decide once.
+    /// Evaluation backend. `auto` is taken per subject as [`crate::pipeline::running::device::choose`]
+    /// does; settle it before ([`crate::pipeline::running::device::settle`]) to decide once.
     pub backend: BackendChoice,
     /// Lanes of the scheduler with a subject's trials solved in batches: default 4096 on a device
     /// backend; on the CPU backend, setting it solves trials in batches too (else one lane per
@@ -64,7 +64,7 @@ pub struct ConvertOptions {
     pub lanes: Option<usize>,
     /// Label quality control for every trial (`--label-qc`), over what the datasets' settings
     /// say; `None` keeps theirs (default `repair`).
-    pub label_qc: Option<crate::pipeline::label_qc::QcMode>,
+    pub label_qc: Option<crate::pipeline::input::label_qc::QcMode>,
 }
 
 /// Trials solved together at most: each holds a writer thread (its 1 MiB chunk and zstd

@@ -9,9 +9,9 @@ use crate::archive::discover::{SubjectGroup, TrialEntry};
 use crate::archive::mcap_out::RunInfo;
 use crate::archive::trial_job::{open_for, solve_and_write, solve_and_write_all, Calibrated, Solver, TrialJob};
 use crate::kinematics::backend::BatchBackend;
-use crate::pipeline::convention::InputOptions;
-use crate::pipeline::device::Chosen;
-use crate::pipeline::frames::TrialFrames;
+use crate::pipeline::input::convention::InputOptions;
+use crate::pipeline::input::frames::TrialFrames;
+use crate::pipeline::running::device::Chosen;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -31,11 +31,14 @@ pub(super) fn solve_all(
 ) -> Result<Vec<TrialOutcome>, String> {
     // The backend holds the model (on the device for wgpu): chosen once the markers are final.
     let pinned = cal.ctx().pinned_to(&cal.calibration);
-    let chosen =
-        match crate::pipeline::device::choose(opt.backend, &pinned.evaluator(), crate::kinematics::gpu::DEFAULT_CAP) {
-            Ok(c) => c,
-            Err(e) => return Err(format!("evaluation backend: {e}")),
-        };
+    let chosen = match crate::pipeline::running::device::choose(
+        opt.backend,
+        &pinned.evaluator(),
+        crate::kinematics::gpu::DEFAULT_CAP,
+    ) {
+        Ok(c) => c,
+        Err(e) => return Err(format!("evaluation backend: {e}")),
+    };
     drop(pinned);
     if let Some(note) = chosen.note() {
         log(&format!("note: {}/{}: {note}", d.name, g.subject));
@@ -68,7 +71,7 @@ pub fn batches(frames: &[u64], lanes: usize, window: usize) -> Vec<(usize, usize
     let (mut i0, mut segs, mut held) = (0, 0, 0);
     for (i, &n) in frames.iter().enumerate() {
         let n = usize::try_from(n).unwrap_or(usize::MAX);
-        let (s, h) = (crate::pipeline::stream::segment_count(n), n.min(window));
+        let (s, h) = (crate::pipeline::running::stream::segment_count(n), n.min(window));
         if i > i0 && (segs >= lanes || held + h > BATCH_HELD_FRAMES || i - i0 >= BATCH_TRIALS) {
             out.push((i0, i));
             (i0, segs, held) = (i, 0, 0);

@@ -13,7 +13,7 @@ pub struct TrialOutcome {
     pub trial: String,
     pub output: String,
     /// "ok", "skipped" (already converted, `--resume`), "suspect" (converted, but see `error`:
-    /// [`crate::pipeline::verdict`]) or "failed".
+    /// [`crate::pipeline::results::verdict`]) or "failed".
     pub status: String,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
@@ -29,9 +29,9 @@ pub struct TrialOutcome {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub backend: Option<String>,
     /// Label quality control events: swaps, jumps, ghosts and what was done
-    /// ([`crate::pipeline::label_qc`]).
+    /// ([`crate::pipeline::input::label_qc`]).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub label_qc: Vec<crate::pipeline::label_qc::LabelEvent>,
+    pub label_qc: Vec<crate::pipeline::input::label_qc::LabelEvent>,
 }
 
 /// A dataset's fate (skipped ones say why: its root is absent; failed ones too: a bad glob, a
@@ -72,7 +72,7 @@ pub struct SubjectCalibration {
     pub subject: String,
     /// Wall time (s).
     pub seconds: f64,
-    pub stages: Vec<crate::solve::calibrate::StageCost>,
+    pub stages: Vec<crate::solve::calibration::StageCost>,
 }
 
 impl ConvertSummary {

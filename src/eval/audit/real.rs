@@ -5,8 +5,8 @@
 use super::stagewise;
 use crate::archive::config::Dataset;
 use crate::archive::discover::discover;
+use crate::pipeline::calibration::subject::{calibrate_placed, calibrate_placed_with, prepare_subject, read_trial};
 use crate::pipeline::stats::MeanP50P90;
-use crate::pipeline::subject::{calibrate_placed, calibrate_placed_with, prepare_subject, read_trial};
 use crate::pipeline::{solve_trial, TrialResult};
 use crate::solve::FrameStatus;
 use serde::{Deserialize, Serialize};

@@ -9,7 +9,7 @@ use crate::io::osim::Measurement;
 use crate::io::MarkerTrial;
 use crate::kinematics::cpu::{self, Workspace};
 use crate::model::proxy::ProxyKind;
-use crate::pipeline::trial::match_markers;
+use crate::pipeline::input::trial::match_markers;
 use crate::pipeline::Context;
 
 /// Marker pairs of the shipped model (`models/fullbody.xml`) per scale group of its profile, as a

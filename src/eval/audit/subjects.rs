@@ -249,9 +249,10 @@ pub fn subject(ctx: &Context, spec: &SubjectSpec, seed: u64, index: usize) -> Sy
             .into_iter()
             .map(|p| {
                 let mut y = proxy.state(&p);
-                for &(j, v) in crate::pipeline::feet_flat::level_targets(model, proxy, &up, std::slice::from_ref(&p))
-                    .iter()
-                    .flat_map(|l| &l.targets)
+                for &(j, v) in
+                    crate::pipeline::calibration::feet_flat::level_targets(model, proxy, &up, std::slice::from_ref(&p))
+                        .iter()
+                        .flat_map(|l| &l.targets)
                 {
                     y[j] = v;
                 }

@@ -7,6 +7,9 @@
 //! frame-major blocks straight into a mapped upload buffer, dispatched, and read back in place. Positions travel relative to a per-frame
 //! reference point (the centroid of the observed markers, rounded to f32) so that f32 resolves
 //! body-scale differences rather than lab coordinates.
+//!
+//! Over 600 lines: the host side of one compute pass (device, buffers, chunking, dispatch,
+//! read-back) kept with its layout checks, so the buffer layouts are read against one place.
 
 mod adapter;
 mod gather;
