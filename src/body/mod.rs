@@ -20,5 +20,8 @@
 
 pub mod asset;
 pub mod bind;
+pub mod segments;
 
 pub use asset::{BodyAsset, BodyError, BodyShape, Phenotype, Skin};
+pub use bind::{bind, Binding, Influence};
+pub use segments::{BindError, SegmentMap};
