@@ -20,8 +20,10 @@
 
 pub mod asset;
 pub mod bind;
+pub mod pose;
 pub mod segments;
 
 pub use asset::{BodyAsset, BodyError, BodyShape, Phenotype, Skin};
 pub use bind::{bind, Binding, Influence};
+pub use pose::{phenotype_for, Dressed, PoseWorkspace};
 pub use segments::{BindError, SegmentMap};
