@@ -148,6 +148,18 @@ pub fn bind(
     asset: &BodyAsset,
     shape: &BodyShape,
 ) -> Result<Binding, BindError> {
+    bind_from(model, world_from_model, asset, shape, None)
+}
+
+/// [`bind`] starting from state `start` (a binding of a nearby shape) instead of the model's
+/// default state; the pull stays toward the default state.
+pub fn bind_from(
+    model: &Model,
+    world_from_model: &UnitQuaternion<f64>,
+    asset: &BodyAsset,
+    shape: &BodyShape,
+    start: Option<&[f64]>,
+) -> Result<Binding, BindError> {
     let map = map_segments(model, asset)?;
     let model_from_world = world_from_model.inverse().to_rotation_matrix().into_inner();
     let mut pairs = Vec::new();
@@ -194,7 +206,7 @@ pub fn bind(
         }
     };
 
-    let mut y = y0.clone();
+    let mut y = start.map_or_else(|| y0.clone(), <[f64]>::to_vec);
     let mut r = residual(&y);
     let mut cost = r.norm_squared();
     let mut mu = 1e-3;
@@ -238,7 +250,7 @@ pub fn bind(
                 cost = cn;
                 mu = (mu / 3.0).max(1e-9);
                 accepted = true;
-                if gain < 1e-14 * cost.max(1e-12) {
+                if gain < 1e-9 * cost.max(1e-12) {
                     accepted = false; // converged
                 }
                 break;

@@ -20,6 +20,7 @@
 
 pub mod asset;
 pub mod bind;
+pub mod metrics;
 pub mod pose;
 pub mod segments;
 

@@ -14,7 +14,7 @@
 //! mesh is then bound to the model ([`super::bind()`]).
 
 use super::asset::{BodyAsset, BodyShape, Phenotype};
-use super::bind::{bind, Binding};
+use super::bind::{bind, bind_from, Binding};
 use super::segments::BindError;
 use crate::kinematics::cpu::{forward, Workspace};
 use crate::model::anthropometry::Sex;
@@ -82,22 +82,36 @@ impl Dressed {
         stature: Option<f64>,
         base: Phenotype,
     ) -> Result<Dressed, BindError> {
-        let target = match stature {
-            Some(h) => h,
-            None => {
-                let reference = asset.shape_from(&base);
-                let b = bind(model, world_from_model, asset, &reference)?;
-                Dressed::from_binding(b, base, &reference, 0.0, asset).bind_pose_height(model, scales)
-            }
-        };
-        let phenotype = match asset.height_for_stature(&base, target) {
+        let first = |target: f64| match asset.height_for_stature(&base, target) {
             Ok(p) => p,
             // beyond the shape space: the nearest end (the skeleton's scales still size it)
             Err(_) => Phenotype { height: if target > asset.rest.stature() { 1.0 } else { 0.0 }, ..base },
         };
-        let shape = asset.shape_from(&phenotype);
-        let b = bind(model, world_from_model, asset, &shape)?;
-        Ok(Dressed::from_binding(b, phenotype, &shape, target, asset))
+        let (target, mut start) = match stature {
+            Some(h) => (h, None),
+            None => {
+                let reference = asset.shape_from(&base);
+                let b = bind(model, world_from_model, asset, &reference)?;
+                let y = b.y.clone();
+                (Dressed::from_binding(b, base, &reference, 0.0, asset).bind_pose_height(model, scales), Some(y))
+            }
+        };
+        // Two rounds: the height the first shape gives at the subject's scales corrects the
+        // stature asked of the second (binding a taller mesh changes the bind scales).
+        let mut ask = target;
+        let mut dressed = None;
+        for round in 0..2 {
+            let phenotype = first(ask);
+            let shape = asset.shape_from(&phenotype);
+            let b = bind_from(model, world_from_model, asset, &shape, start.as_deref())?;
+            start = Some(b.y.clone());
+            let d = Dressed::from_binding(b, phenotype, &shape, target, asset);
+            if round == 0 && scales.len() == 3 * model.nb() {
+                ask += target - d.bind_pose_height(model, scales);
+            }
+            dressed = Some(d);
+        }
+        Ok(dressed.expect("two rounds"))
     }
 
     fn from_binding(binding: Binding, phenotype: Phenotype, shape: &BodyShape, target: f64, asset: &BodyAsset) -> Dressed {
@@ -167,9 +181,10 @@ mod tests {
         let asset = BodyAsset::shipped().unwrap();
         let model = Context::shipped().unwrap().model;
         let ones = vec![1.0; 3 * model.nb()];
-        let body = Dressed::new(&model, &UnitQuaternion::identity(), &asset, &ones, Some(1.70), Phenotype::default())
+        let body = Dressed::new(&model, &UnitQuaternion::identity(), &asset, &ones, None, Phenotype::default())
             .unwrap();
-        assert!((body.shape_stature - 1.70).abs() < 1e-3, "{}", body.shape_stature);
+        let h = body.bind_pose_height(&model, &ones);
+        assert!((h - body.target_stature).abs() < 0.01, "{h} {}", body.target_stature);
         // at the bind state itself (its own scales) skinning reproduces the shape exactly
         let mut ws = PoseWorkspace::new(&model, &body);
         body.pose(&model, &body.binding.y, &mut ws);
