@@ -115,6 +115,18 @@ fn body_follows_a_synthetic_trial_of_the_shipped_model() {
     let rec = smocap::archive::export::read_trial_record(&mcap).unwrap();
     let take = smocap::render::Take::from_record(&rec, &mcap).unwrap();
     let m = measure("synthetic", &take.model, &take.world_from_model, &take.scales, None, &take.q);
+    // `export --mesh`: posed OBJ files, closed, as many vertices as the asset
+    let out = dir.join("mesh");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_smocap"))
+        .args(["export", mcap.to_str().unwrap(), "--mesh", out.to_str().unwrap(), "--frames", "0,50"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for f in [0, 50] {
+        let text = std::fs::read_to_string(out.join(format!("walk01_{f}.obj"))).unwrap();
+        assert_eq!(text.lines().filter(|l| l.starts_with("v ")).count(), 13_380);
+        assert_eq!(text.lines().filter(|l| l.starts_with("f ")).count(), 26_756);
+    }
     assert!(m.stature_error.abs() < 0.01, "{}", m.stature_error);
     assert!(m.inside.0 as f64 >= 0.999 * m.inside.1 as f64, "{:?}", m.inside);
     assert!(m.edge_in_range >= 0.999, "{}", m.edge_in_range);

@@ -21,6 +21,7 @@
 pub mod asset;
 pub mod bind;
 pub mod metrics;
+pub mod obj;
 pub mod pose;
 pub mod segments;
 
