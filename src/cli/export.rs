@@ -29,6 +29,10 @@ pub struct ExportArgs {
     /// Trial frame numbers for `--mesh`, comma-separated (default: the first frame).
     #[arg(long, value_delimiter = ',', requires = "mesh")]
     pub frames: Vec<usize>,
+    /// What `--gltf` shows of the subject: `mesh` (the body mesh skinned to the body nodes;
+    /// capsules, with a note, where the body does not bind to the model) or `capsules` (bones).
+    #[arg(long, value_enum, default_value_t = BodyKind::Mesh)]
+    pub body: BodyKind,
     #[command(flatten)]
     pub scene: GltfArgs,
     /// The model (.osim or MJCF) that gives coordinate order and which are in degrees; by
@@ -36,6 +40,13 @@ pub struct ExportArgs {
     /// at its recorded path).
     #[arg(long)]
     pub model: Option<PathBuf>,
+}
+
+/// The subject in a glTF export.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum BodyKind {
+    Mesh,
+    Capsules,
 }
 
 /// Options of a glTF export (`export --gltf`, `solve --gltf-dir`).
@@ -71,7 +82,21 @@ pub fn run(a: ExportArgs) -> anyhow::Result<u8> {
     if let Some(out) = &a.gltf {
         let take = crate::render::Take::from_record(&rec, &a.file)?;
         let cams = crate::render::cameras(&take, a.scene.cameras.as_deref(), a.scene.rig_seed)?;
-        std::fs::write(out, crate::render::scene::glb(&take, &cams, a.scene.up)?)
+        let body = match a.body {
+            BodyKind::Capsules => None,
+            BodyKind::Mesh => {
+                let asset = crate::body::BodyAsset::shipped()?;
+                let scales = &take.scales;
+                match crate::body::Dressed::new(&take.model, &take.world_from_model, &asset, scales, None, Default::default()) {
+                    Ok(d) => Some(d),
+                    Err(e) => {
+                        eprintln!("note: the body mesh does not bind to this model ({e}); bones as capsules");
+                        None
+                    }
+                }
+            }
+        };
+        std::fs::write(out, crate::render::scene::glb_with_body(&take, &cams, a.scene.up, body.as_ref())?)
             .with_context(|| format!("writing {}", out.display()))?;
         eprintln!(
             "wrote {} ({} frames, {} bodies, {} cameras)",
