@@ -5,12 +5,14 @@
 //! [`model`] (immutable tree, scales, markers, proxy map) → [`kinematics`] (forward kinematics,
 //! Jacobians, Gauss–Newton assembly) → [`solve`] (trust-region QP, QP backends, calibration) →
 //! [`pipeline`] (input, calibration, running, results) → [`archive`] (whole datasets to MCAP) →
-//! [`retarget`] (humanoid robots), [`render`] (glTF scenes, cameras, 2D ground truth, previews)
+//! [`body`] (a skinned CC0 body mesh on the solved skeleton), [`retarget`] (humanoid robots),
+//! [`render`] (glTF scenes, cameras, 2D ground truth, previews)
 //! and [`eval`] (the evaluation studies) → the `smocap` command line. A module imports only from
 //! the layers before it (`docs/ARCHITECTURE.md`, checked by `tests/architecture.rs`); `io` reads
 //! files into [`model`]'s types, so [`model`] sits below it.
 
 pub mod archive;
+pub mod body;
 pub mod cli;
 pub mod eval;
 pub mod io;

@@ -6,7 +6,7 @@ use clap::Args;
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
-#[command(group(clap::ArgGroup::new("outputs").required(true).multiple(true).args(["mot", "csv", "gltf"])))]
+#[command(group(clap::ArgGroup::new("outputs").required(true).multiple(true).args(["mot", "csv", "gltf", "mesh"])))]
 pub struct ExportArgs {
     /// An MCAP file written by `smocap convert`.
     pub file: PathBuf,
@@ -22,6 +22,17 @@ pub struct ExportArgs {
     /// cameras (metres).
     #[arg(long)]
     pub gltf: Option<PathBuf>,
+    /// Write the subject's body mesh posed at `--frames` as OBJ files `<trial>_<frame>.obj`
+    /// into this folder (metres, the Z-up world of `project`).
+    #[arg(long)]
+    pub mesh: Option<PathBuf>,
+    /// Trial frame numbers for `--mesh`, comma-separated (default: the first frame).
+    #[arg(long, value_delimiter = ',', requires = "mesh")]
+    pub frames: Vec<usize>,
+    /// What `--gltf` shows of the subject: `mesh` (the body mesh skinned to the body nodes;
+    /// capsules, with a note, where the body does not bind to the model) or `capsules` (bones).
+    #[arg(long, value_enum, default_value_t = BodyKind::Mesh)]
+    pub body: BodyKind,
     #[command(flatten)]
     pub scene: GltfArgs,
     /// The model (.osim or MJCF) that gives coordinate order and which are in degrees; by
@@ -29,6 +40,13 @@ pub struct ExportArgs {
     /// at its recorded path).
     #[arg(long)]
     pub model: Option<PathBuf>,
+}
+
+/// The subject in a glTF export.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum BodyKind {
+    Mesh,
+    Capsules,
 }
 
 /// Options of a glTF export (`export --gltf`, `solve --gltf-dir`).
@@ -55,10 +73,30 @@ pub fn run(a: ExportArgs) -> anyhow::Result<u8> {
         }
     }
     let rec = read_trial_record(&a.file)?;
+    if let Some(dir) = &a.mesh {
+        write_meshes(&rec, &a.file, dir, &a.frames)?;
+        if a.mot.is_none() && a.csv.is_none() && a.gltf.is_none() {
+            return Ok(0);
+        }
+    }
     if let Some(out) = &a.gltf {
         let take = crate::render::Take::from_record(&rec, &a.file)?;
         let cams = crate::render::cameras(&take, a.scene.cameras.as_deref(), a.scene.rig_seed)?;
-        std::fs::write(out, crate::render::scene::glb(&take, &cams, a.scene.up)?)
+        let body = match a.body {
+            BodyKind::Capsules => None,
+            BodyKind::Mesh => {
+                let asset = crate::body::BodyAsset::shipped()?;
+                let scales = &take.scales;
+                match crate::body::Dressed::new(&take.model, &take.world_from_model, &asset, scales, None, Default::default()) {
+                    Ok(d) => Some(d),
+                    Err(e) => {
+                        eprintln!("note: the body mesh does not bind to this model ({e}); bones as capsules");
+                        None
+                    }
+                }
+            }
+        };
+        std::fs::write(out, crate::render::scene::glb_with_body(&take, &cams, a.scene.up, body.as_ref())?)
             .with_context(|| format!("writing {}", out.display()))?;
         eprintln!(
             "wrote {} ({} frames, {} bodies, {} cameras)",
@@ -93,4 +131,38 @@ pub fn run(a: ExportArgs) -> anyhow::Result<u8> {
         eprintln!("wrote {} ({} frames)", out.display(), rec.frames.len());
     }
     Ok(0)
+}
+
+/// The body posed at `frames` (trial frame numbers; the first frame if none) as OBJ files.
+fn write_meshes(
+    rec: &crate::archive::export::TrialRecord,
+    file: &std::path::Path,
+    dir: &std::path::Path,
+    frames: &[usize],
+) -> anyhow::Result<()> {
+    use anyhow::Context as _;
+    use crate::body::{BodyAsset, Dressed, Phenotype, PoseWorkspace};
+    let take = crate::render::Take::from_record(rec, file)?;
+    let asset = BodyAsset::shipped()?;
+    let body = Dressed::new(&take.model, &take.world_from_model, &asset, &take.scales, None, Phenotype::default())
+        .context("binding the body mesh to the trial's model")?;
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let wanted = if frames.is_empty() { vec![*take.frames.first().unwrap_or(&0)] } else { frames.to_vec() };
+    let mut ws = PoseWorkspace::new(&take.model, &body);
+    let mut y = vec![0.0; take.model.ny()];
+    for f in wanted {
+        let i = take.frames.iter().position(|&g| g == f).with_context(|| {
+            format!("frame {f} is not in {} (frames {}..={})", file.display(), take.frames[0], take.frames[take.len() - 1])
+        })?;
+        let nq = take.model.nq();
+        y[..nq].copy_from_slice(&take.q[i]);
+        y[nq..].copy_from_slice(&take.scales);
+        body.pose(&take.model, &y, &mut ws);
+        let name = format!("{}_{f}", take.name);
+        let out = dir.join(format!("{name}.obj"));
+        std::fs::write(&out, crate::body::obj::obj(&name, &ws.vertices, &body.triangles))
+            .with_context(|| format!("writing {}", out.display()))?;
+        eprintln!("wrote {}", out.display());
+    }
+    Ok(())
 }

@@ -39,6 +39,8 @@ pub struct Node {
     pub scale: [f64; 3],
     pub mesh: Option<usize>,
     pub camera: Option<usize>,
+    /// The skin (index into [`Document::skins`]) deforming this node's mesh.
+    pub skin: Option<usize>,
 }
 
 impl Node {
@@ -52,6 +54,7 @@ impl Node {
             scale: [1.0; 3],
             mesh: None,
             camera: None,
+            skin: None,
         }
     }
 }
@@ -65,6 +68,18 @@ pub struct Primitive {
     /// Three per triangle, counter-clockwise seen from outside.
     pub indices: Vec<u32>,
     pub material: usize,
+    /// Skinning, one per position where the mesh is skinned (else empty): joint indices into
+    /// the skin's joints and their weights (summing to 1).
+    pub joints: Vec<[u16; 4]>,
+    pub weights: Vec<[f32; 4]>,
+}
+
+/// A skin: its joints (node indices) and each joint's inverse bind matrix (column-major 4×4).
+#[derive(Clone, Debug)]
+pub struct Skin {
+    pub name: String,
+    pub joints: Vec<usize>,
+    pub inverse_bind: Vec<[f32; 16]>,
 }
 
 /// A mesh of one or more primitives.
@@ -128,6 +143,7 @@ pub struct Document {
     pub materials: Vec<Material>,
     pub cameras: Vec<Camera>,
     pub animation: Option<Animation>,
+    pub skins: Vec<Skin>,
 }
 
 /// The binary buffer being laid out and the JSON root referring to it.
@@ -190,6 +206,25 @@ impl Builder {
             type_: Valid(type_),
             min,
             max,
+            name: None,
+            normalized: false,
+            sparse: None,
+        })
+    }
+
+    fn joints(&mut self, j: &[[u16; 4]]) -> json::Index<json::Accessor> {
+        let bytes: Vec<u8> = j.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+        let view = self.view(&bytes, Some(json::buffer::Target::ArrayBuffer));
+        self.root.push(json::Accessor {
+            buffer_view: Some(view),
+            byte_offset: None,
+            count: USize64::from(j.len()),
+            component_type: Valid(json::accessor::GenericComponentType(json::accessor::ComponentType::U16)),
+            extensions: None,
+            extras: Default::default(),
+            type_: Valid(json::accessor::Type::Vec4),
+            min: None,
+            max: None,
             name: None,
             normalized: false,
             sparse: None,
@@ -260,6 +295,14 @@ pub fn to_glb(doc: &Document) -> Result<Vec<u8>, GltfError> {
             let mut attributes = BTreeMap::new();
             attributes.insert(Valid(json::mesh::Semantic::Positions), b.floats(&pos, Type::Vec3, 3, true, target));
             attributes.insert(Valid(json::mesh::Semantic::Normals), b.floats(&nor, Type::Vec3, 3, false, target));
+            if !p.joints.is_empty() {
+                if p.joints.len() != p.positions.len() || p.weights.len() != p.positions.len() {
+                    return Err(bad("joints and weights do not match the positions".into()));
+                }
+                attributes.insert(Valid(json::mesh::Semantic::Joints(0)), b.joints(&p.joints));
+                let w: Vec<f32> = p.weights.iter().flatten().copied().collect();
+                attributes.insert(Valid(json::mesh::Semantic::Weights(0)), b.floats(&w, Type::Vec4, 4, false, target));
+            }
             primitives.push(json::mesh::Primitive {
                 attributes,
                 extensions: None,
@@ -328,8 +371,23 @@ pub fn to_glb(doc: &Document) -> Result<Vec<u8>, GltfError> {
             rotation: (r != [0.0, 0.0, 0.0, 1.0]).then_some(json::scene::UnitQuaternion(r)),
             scale: (n.scale != [1.0; 3]).then(|| f32s(&n.scale)),
             translation: (n.translation != [0.0; 3]).then(|| f32s(&n.translation)),
-            skin: None,
+            skin: n.skin.map(|k| json::Index::new(k as u32)),
             weights: None,
+        });
+    }
+    for sk in &doc.skins {
+        if sk.joints.len() != sk.inverse_bind.len() || sk.joints.iter().any(|&j| j >= doc.nodes.len()) {
+            return Err(GltfError::Invalid { what: "skin", name: sk.name.clone(), problem: "joints and matrices".into() });
+        }
+        let m: Vec<f32> = sk.inverse_bind.iter().flatten().copied().collect();
+        let ibm = b.floats(&m, Type::Mat4, 16, false, None);
+        b.root.push(json::Skin {
+            extensions: None,
+            extras: Default::default(),
+            inverse_bind_matrices: Some(ibm),
+            joints: sk.joints.iter().map(|&j| json::Index::new(j as u32)).collect(),
+            name: Some(sk.name.clone()),
+            skeleton: None,
         });
     }
     let scene = b.root.push(json::Scene {

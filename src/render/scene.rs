@@ -23,6 +23,7 @@ use super::rig::Camera;
 use super::take::{side_of, Side, Take};
 use super::RenderError;
 use crate::io::gltf::{self, Document, Material, Mesh, Node, Primitive, Track, Values};
+use crate::body::{Dressed, PoseWorkspace};
 use crate::kinematics::Workspace;
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 
@@ -87,9 +88,20 @@ fn local(take: &Take, ws: &Workspace, b: usize) -> (Matrix3<f64>, Vector3<f64>) 
     }
 }
 
-/// The glTF document of `take` with `cameras`, for up axis `up`.
+/// The glTF document of `take` with `cameras`, for up axis `up` (bones as capsules).
 pub fn document(take: &Take, cameras: &[Camera], up: Up) -> Result<Document, RenderError> {
+    document_with_body(take, cameras, up, None)
+}
+
+/// [`document`] with the subject's body mesh in place of the bone capsules where `body` is
+/// given: a root node `body` showing the mesh skinned to the body nodes (glTF skin `body`, one
+/// joint per model body in model order, inverse bind matrices of the bind pose at the subject's
+/// scales, JOINTS_0 as u16, WEIGHTS_0 as f32). glTF blends one rest position per vertex, where
+/// [`Dressed::pose`] scales each influence's own local point: the two agree at the bind pose and
+/// differ only where a vertex's bodies are scaled differently.
+pub fn document_with_body(take: &Take, cameras: &[Camera], up: Up, body: Option<&Dressed>) -> Result<Document, RenderError> {
     let model = &take.model;
+    let dressed = body;
     let mut doc = Document {
         materials: MATERIALS.iter().map(|(n, c)| Material { name: (*n).into(), rgba: *c }).collect(),
         ..Default::default()
@@ -115,7 +127,8 @@ pub fn document(take: &Take, cameras: &[Camera], up: Up) -> Result<Document, Ren
         n.rotation = xyzw(&quat(&r));
         let start = take.joint_centre_local(b);
         let mut prims: Vec<Primitive> = Vec::new();
-        for (c, child) in model.bodies.iter().enumerate().filter(|(_, c)| c.parent == Some(b)) {
+        let children = model.bodies.iter().enumerate().filter(|(_, c)| c.parent == Some(b) && dressed.is_none());
+        for (c, child) in children {
             let s = Vector3::new(take.scales[3 * b], take.scales[3 * b + 1], take.scales[3 * b + 2]);
             let end = s.component_mul(&child.joint.parent_offset.translation.vector);
             if (end - start).norm() < 1e-6 {
@@ -175,8 +188,69 @@ pub fn document(take: &Take, cameras: &[Camera], up: Up) -> Result<Document, Ren
             zfar: 1000.0,
         });
     }
+    if let Some(dressed) = dressed {
+        skinned_body(&mut doc, take, up, dressed);
+    }
     doc.animation = Some(animation(take, first_obs, &mut ws));
     Ok(doc)
+}
+
+/// Adds the root node `body`, its mesh and its skin over the body nodes (`2 + b`).
+fn skinned_body(doc: &mut Document, take: &Take, up: Up, body: &Dressed) {
+    let model = &take.model;
+    let mut ws = PoseWorkspace::new(model, body);
+    body.pose(model, &body.bind_state(model, &take.scales), &mut ws);
+    let s = up.scene_from_world().to_rotation_matrix().into_inner();
+    let sw = s * take.world_from_model.to_rotation_matrix().into_inner();
+    let positions: Vec<[f32; 3]> = ws
+        .vertices
+        .iter()
+        .map(|v| {
+            let p = s * Vector3::new(v[0] as f64, v[1] as f64, v[2] as f64);
+            [p.x as f32, p.y as f32, p.z as f32]
+        })
+        .collect();
+    let mut normals = vec![Vector3::<f64>::zeros(); positions.len()];
+    let p3 = |i: u32| positions[i as usize].map(|x| x as f64).into();
+    for t in &body.triangles {
+        let (a, b, c): (Vector3<f64>, Vector3<f64>, Vector3<f64>) = (p3(t[0]), p3(t[1]), p3(t[2]));
+        let n = (b - a).cross(&(c - a));
+        for &i in t {
+            normals[i as usize] += n;
+        }
+    }
+    let normals = normals.iter().map(|n| (n / n.norm().max(1e-30)).map(|x| x as f32).into()).collect();
+    let mut prim = Primitive {
+        positions,
+        normals,
+        indices: body.triangles.iter().flatten().copied().collect(),
+        material: doc.materials.len(),
+        ..Default::default()
+    };
+    doc.materials.push(Material { name: "skin".into(), rgba: [0.8, 0.62, 0.5, 1.0] });
+    for inf in &body.binding.influences {
+        prim.joints.push(inf.map(|x| if x.weight > 0.0 { x.body } else { 0 }));
+        prim.weights.push(inf.map(|x| x.weight));
+    }
+    let inverse_bind = (0..model.nb())
+        .map(|b| {
+            let r = sw * ws.kin.body_rot[b];
+            let t = sw * ws.kin.body_pos[b];
+            let inv = nalgebra::Matrix4::new_translation(&t) * r.to_homogeneous();
+            let inv = inv.try_inverse().unwrap_or_else(nalgebra::Matrix4::identity);
+            let mut m = [0f32; 16];
+            for (k, v) in inv.iter().enumerate() {
+                m[k] = *v as f32; // column-major, as glTF
+            }
+            m
+        })
+        .collect();
+    doc.skins.push(gltf::Skin { name: "body".into(), joints: (0..model.nb()).map(|b| 2 + b).collect(), inverse_bind });
+    let mut n = Node::new("body", None);
+    n.mesh = Some(doc.meshes.len());
+    n.skin = Some(0);
+    doc.meshes.push(Mesh { name: "body".into(), primitives: vec![prim] });
+    doc.nodes.push(n);
 }
 
 /// The `motion` animation: every body's local pose per frame, the observed markers.
@@ -226,6 +300,11 @@ fn animation(take: &Take, first_obs: usize, ws: &mut Workspace) -> gltf::Animati
 /// The `.glb` bytes of `take` with `cameras` for up axis `up`.
 pub fn glb(take: &Take, cameras: &[Camera], up: Up) -> Result<Vec<u8>, RenderError> {
     Ok(gltf::to_glb(&document(take, cameras, up)?)?)
+}
+
+/// [`glb`] with the body mesh where `body` is given ([`document_with_body`]).
+pub fn glb_with_body(take: &Take, cameras: &[Camera], up: Up, body: Option<&Dressed>) -> Result<Vec<u8>, RenderError> {
+    Ok(gltf::to_glb(&document_with_body(take, cameras, up, body)?)?)
 }
 
 const SEGMENTS: usize = 12;

@@ -1,0 +1,223 @@
+//! A subject's body: the mesh shaped to the subject's stature, bound to its model, and posed by
+//! linear-blend skinning with the model's body frames from forward kinematics.
+//!
+//! A vertex with influences `(b, w, u)` ([`super::Influence`]: `u` in body `b`'s frame at unit
+//! scale) goes, in a state whose scales are `s` and body frames `(R_b, p_b)`, to
+//! `Σ w (R_b (s_b ⊙ u) + p_b)`, turned into the Z-up world by `world_from_model`. The bind
+//! state's own scales are divided out of `u`, so the subject's scale factors are applied in the
+//! bind → pose transform: a femur scaled 1.1 makes the thigh's skin 1.1 times as long along the
+//! femur's axis (skin blended across a joint follows both bodies' scales).
+//!
+//! Shaping: the mesh's `height` parameter is chosen so that its stature is the subject's
+//! ([`BodyAsset::height_for_stature`]): the calibrated stature where it is known, else the
+//! stature of the reference mesh dressed on the subject's scales; sex sets `gender`. The shaped
+//! mesh is then bound to the model ([`super::bind()`]).
+
+use super::asset::{BodyAsset, BodyShape, Phenotype};
+use super::bind::{bind, bind_from, Binding};
+use super::segments::BindError;
+use crate::kinematics::cpu::{forward, Workspace};
+use crate::model::anthropometry::Sex;
+use crate::model::Model;
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+
+/// The body of one subject on its model.
+#[derive(Clone, Debug)]
+pub struct Dressed {
+    pub binding: Binding,
+    /// The shape's parameters and its stature (m, highest minus lowest vertex of the shape).
+    pub phenotype: Phenotype,
+    pub shape_stature: f64,
+    /// The stature the shape was chosen for (m).
+    pub target_stature: f64,
+    /// Counter-clockwise seen from outside.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// Scratch for posing: forward kinematics and the posed vertices (Z-up world, m).
+#[derive(Clone, Debug)]
+pub struct PoseWorkspace {
+    pub kin: Workspace,
+    pub vertices: Vec<[f32; 3]>,
+    rot: Vec<Matrix3<f64>>,
+    pos: Vec<Vector3<f64>>,
+}
+
+impl PoseWorkspace {
+    pub fn new(model: &Model, body: &Dressed) -> PoseWorkspace {
+        PoseWorkspace {
+            kin: Workspace::new(model),
+            vertices: vec![[0.0; 3]; body.binding.influences.len()],
+            rot: vec![Matrix3::identity(); model.nb()],
+            pos: vec![Vector3::zeros(); model.nb()],
+        }
+    }
+}
+
+/// The reference phenotype with the subject's sex (`gender` 0 male, 1 female; 0.5 unknown).
+pub fn phenotype_for(sex: Option<Sex>) -> Phenotype {
+    let gender = match sex {
+        Some(Sex::Male) => 0.0,
+        Some(Sex::Female) => 1.0,
+        None => 0.5,
+    };
+    Phenotype { gender, ..Phenotype::default() }
+}
+
+/// Highest minus lowest point along Z.
+pub fn height_of(vertices: &[[f32; 3]]) -> f64 {
+    let (lo, hi) = vertices.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| (lo.min(v[2]), hi.max(v[2])));
+    (hi - lo) as f64
+}
+
+impl Dressed {
+    /// The body of a subject whose model is `model` (frame `world_from_model` from the Z-up
+    /// world) at scales `scales` (`3·body + axis`), of stature `stature` (m) where known, from
+    /// phenotype `base` (its `height` is replaced).
+    pub fn new(
+        model: &Model,
+        world_from_model: &UnitQuaternion<f64>,
+        asset: &BodyAsset,
+        scales: &[f64],
+        stature: Option<f64>,
+        base: Phenotype,
+    ) -> Result<Dressed, BindError> {
+        let first = |target: f64| match asset.height_for_stature(&base, target) {
+            Ok(p) => p,
+            // beyond the shape space: the nearest end (the skeleton's scales still size it)
+            Err(_) => Phenotype { height: if target > asset.rest.stature() { 1.0 } else { 0.0 }, ..base },
+        };
+        let (target, mut start) = match stature {
+            Some(h) => (h, None),
+            None => {
+                let reference = asset.shape_from(&base);
+                let b = bind(model, world_from_model, asset, &reference)?;
+                let y = b.y.clone();
+                (Dressed::from_binding(b, base, &reference, 0.0, asset).bind_pose_height(model, scales), Some(y))
+            }
+        };
+        // Two rounds: the height the first shape gives at the subject's scales corrects the
+        // stature asked of the second (binding a taller mesh changes the bind scales).
+        let mut ask = target;
+        let mut dressed = None;
+        for round in 0..2 {
+            let phenotype = first(ask);
+            let shape = asset.shape_from(&phenotype);
+            let b = bind_from(model, world_from_model, asset, &shape, start.as_deref())?;
+            start = Some(b.y.clone());
+            let d = Dressed::from_binding(b, phenotype, &shape, target, asset);
+            if round == 0 && scales.len() == 3 * model.nb() {
+                ask += target - d.bind_pose_height(model, scales);
+            }
+            dressed = Some(d);
+        }
+        Ok(dressed.expect("two rounds"))
+    }
+
+    fn from_binding(binding: Binding, phenotype: Phenotype, shape: &BodyShape, target: f64, asset: &BodyAsset) -> Dressed {
+        Dressed {
+            binding,
+            phenotype,
+            shape_stature: shape.stature(),
+            target_stature: target,
+            triangles: asset.triangles.clone(),
+        }
+    }
+
+    /// The bind state's coordinates with `scales`.
+    pub fn bind_state(&self, model: &Model, scales: &[f64]) -> Vec<f64> {
+        let mut y = self.binding.y[..model.nq()].to_vec();
+        y.extend_from_slice(scales);
+        y
+    }
+
+    /// Height (m) of the body at the bind pose and `scales`.
+    pub fn bind_pose_height(&self, model: &Model, scales: &[f64]) -> f64 {
+        let mut ws = PoseWorkspace::new(model, self);
+        self.pose(model, &self.bind_state(model, scales), &mut ws);
+        height_of(&ws.vertices)
+    }
+
+    /// Poses the body at state `y = [q; s]`: forward kinematics, then [`Dressed::skin`] into
+    /// `ws.vertices`. Allocates nothing.
+    pub fn pose(&self, model: &Model, y: &[f64], ws: &mut PoseWorkspace) {
+        forward(model, y, &mut ws.kin);
+        let PoseWorkspace { kin, vertices, rot, pos } = ws;
+        let r0 = self.binding.world_from_model.to_rotation_matrix().into_inner();
+        for b in 0..model.nb() {
+            let i = model.scale_index(b, 0);
+            // world from unit-scale body coordinates: R0 R_b diag(s_b)
+            rot[b] = r0 * kin.body_rot[b] * Matrix3::from_diagonal(&Vector3::new(y[i], y[i + 1], y[i + 2]));
+            pos[b] = r0 * kin.body_pos[b];
+        }
+        self.skin(rot, pos, vertices);
+    }
+
+    /// Linear-blend skinning with `rot[b]`, `pos[b]`: each body's map from its unit-scale
+    /// coordinates to the output frame (`R diag(s)`, origin), into `out` (one per vertex).
+    pub fn skin(&self, rot: &[Matrix3<f64>], pos: &[Vector3<f64>], out: &mut [[f32; 3]]) {
+        for (o, inf) in out.iter_mut().zip(&self.binding.influences) {
+            let mut v = Vector3::zeros();
+            for x in inf {
+                if x.weight == 0.0 {
+                    break;
+                }
+                let b = x.body as usize;
+                let u = Vector3::new(x.local[0] as f64, x.local[1] as f64, x.local[2] as f64);
+                v += (rot[b] * u + pos[b]) * x.weight as f64;
+            }
+            *o = [v.x as f32, v.y as f32, v.z as f32];
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::context::Context;
+
+    #[test]
+    fn the_bind_pose_gives_back_the_shaped_mesh() {
+        let asset = BodyAsset::shipped().unwrap();
+        let model = Context::shipped().unwrap().model;
+        let ones = vec![1.0; 3 * model.nb()];
+        let body = Dressed::new(&model, &UnitQuaternion::identity(), &asset, &ones, None, Phenotype::default())
+            .unwrap();
+        let h = body.bind_pose_height(&model, &ones);
+        assert!((h - body.target_stature).abs() < 0.01, "{h} {}", body.target_stature);
+        // at the bind state itself (its own scales) skinning reproduces the shape exactly
+        let mut ws = PoseWorkspace::new(&model, &body);
+        body.pose(&model, &body.binding.y, &mut ws);
+        let shape = asset.shape_from(&body.phenotype);
+        let worst = ws
+            .vertices
+            .iter()
+            .zip(&shape.vertices)
+            .map(|(a, b)| (Vector3::new(a[0] as f64, a[1] as f64, a[2] as f64) - b).norm())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-5, "{worst}");
+    }
+
+    #[test]
+    fn a_longer_femur_lengthens_the_thigh() {
+        let asset = BodyAsset::shipped().unwrap();
+        let model = Context::shipped().unwrap().model;
+        let body = Dressed::new(&model, &UnitQuaternion::identity(), &asset, &[], Some(1.75), Phenotype::default())
+            .unwrap();
+        let mut y = body.binding.y.clone();
+        let mut ws = PoseWorkspace::new(&model, &body);
+        body.pose(&model, &y, &mut ws);
+        let before = height_of(&ws.vertices);
+        let femur = model.body_index("femur_r").unwrap();
+        let fl = model.body_index("femur_l").unwrap();
+        for b in [femur, fl] {
+            for k in 0..3 {
+                y[model.scale_index(b, k)] *= 1.1;
+            }
+        }
+        body.pose(&model, &y, &mut ws);
+        let after = height_of(&ws.vertices);
+        // a thigh is about 0.4 m: 10 % longer raises the body by about 4 cm
+        assert!(after - before > 0.025 && after - before < 0.06, "{before} {after}");
+    }
+}

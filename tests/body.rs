@@ -1,0 +1,182 @@
+//! The body mesh on solved motion (issue 33): its height against the subject's stature, the joint
+//! centres inside the skin, edge lengths and enclosed volume against the rest pose, on a synthetic
+//! trial of the shipped model and on the shared Rajagopal walking trial (OpenSim's own inverse
+//! kinematics of it, at OpenSim's scales). The measured numbers are printed (`--nocapture`).
+
+mod common;
+
+use common::{converted_synthetic, scale_set, shared};
+use nalgebra::UnitQuaternion;
+use smocap::body::bind::targets;
+use smocap::body::metrics::{edge_ratios, edges, volume, winding_number};
+use smocap::body::{BodyAsset, Dressed, Phenotype, PoseWorkspace};
+use smocap::model::Model;
+
+struct Measured {
+    /// Height at the bind pose and the subject's scales minus the target stature (m).
+    stature_error: f64,
+    inside: (usize, usize),
+    edge_in_range: f64,
+    edge_min: f64,
+    edge_max: f64,
+    volume_min: f64,
+    volume_max: f64,
+}
+
+fn measure(
+    name: &str,
+    model: &Model,
+    world_from_model: &UnitQuaternion<f64>,
+    scales: &[f64],
+    stature: Option<f64>,
+    frames: &[Vec<f64>],
+) -> Measured {
+    let asset = BodyAsset::shipped().unwrap();
+    let t = std::time::Instant::now();
+    let body = Dressed::new(model, world_from_model, &asset, scales, stature, Phenotype::default()).unwrap();
+    let dress_s = t.elapsed().as_secs_f64();
+    let mut ws = PoseWorkspace::new(model, &body);
+    body.pose(model, &body.bind_state(model, scales), &mut ws);
+    let rest = ws.vertices.clone();
+    let height = smocap::body::pose::height_of(&rest);
+    let rest_volume = volume(&rest, &body.triangles);
+    let e = edges(&body.triangles);
+    let joints: Vec<usize> = targets(model, &body.binding.map, &asset).iter().map(|t| t.0).collect();
+    let r0 = world_from_model.to_rotation_matrix().into_inner();
+    let (mut inside, mut total, mut in_range, mut n_edges) = (0, 0, 0usize, 0usize);
+    let (mut emin, mut emax, mut vmin, mut vmax) = (f64::INFINITY, 0.0f64, f64::INFINITY, 0.0f64);
+    let mut ratios = Vec::new();
+    let mut outside = std::collections::BTreeMap::<String, usize>::new();
+    for q in frames {
+        let mut y = q.clone();
+        y.extend_from_slice(scales);
+        body.pose(model, &y, &mut ws);
+        for &b in &joints {
+            let p = r0 * ws.kin.body_pos[b];
+            total += 1;
+            if winding_number(&ws.vertices, &body.triangles, [p.x, p.y, p.z]) > 0.5 {
+                inside += 1;
+            } else {
+                *outside.entry(model.bodies[b].name.clone()).or_default() += 1;
+            }
+        }
+        edge_ratios(&rest, &ws.vertices, &e, &mut ratios);
+        for &r in &ratios {
+            emin = emin.min(r);
+            emax = emax.max(r);
+            in_range += (0.5..=2.0).contains(&r) as usize;
+        }
+        n_edges += ratios.len();
+        let v = volume(&ws.vertices, &body.triangles) / rest_volume;
+        vmin = vmin.min(v);
+        vmax = vmax.max(v);
+    }
+    // posing alone, every frame (this build's optimisation level; not asserted)
+    let t = std::time::Instant::now();
+    let reps = (2000 / frames.len().max(1)).max(1);
+    let mut y = vec![0.0; model.ny()];
+    for _ in 0..reps {
+        for q in frames {
+            y[..q.len()].copy_from_slice(q);
+            y[q.len()..].copy_from_slice(scales);
+            body.pose(model, &y, &mut ws);
+        }
+    }
+    let fps = (reps * frames.len()) as f64 / t.elapsed().as_secs_f64();
+    let target = body.target_stature;
+    let m = Measured {
+        stature_error: height - target,
+        inside: (inside, total),
+        edge_in_range: in_range as f64 / n_edges as f64,
+        edge_min: emin,
+        edge_max: emax,
+        volume_min: vmin,
+        volume_max: vmax,
+    };
+    eprintln!(
+        "{name}: {} frames; dressed in {dress_s:.3} s (height {:.3}); target stature {target:.4} m, body {height:.4} m \
+         (error {:+.1} mm); joint centres inside {inside}/{total} ({:.3} %), outside by body {outside:?}; \
+         edges in 0.5–2× rest {:.4} % (ratios {emin:.3}..{emax:.3}); volume / rest {vmin:.4}..{vmax:.4}; \
+         posing {fps:.0} frames/s (one core)",
+        frames.len(),
+        body.phenotype.height,
+        1e3 * m.stature_error,
+        100.0 * inside as f64 / total as f64,
+        100.0 * m.edge_in_range,
+    );
+    m
+}
+
+#[test]
+fn body_follows_a_synthetic_trial_of_the_shipped_model() {
+    let dir = std::env::temp_dir().join(format!("smocap-body-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let mcap = converted_synthetic(&dir, 60);
+    let rec = smocap::archive::export::read_trial_record(&mcap).unwrap();
+    let take = smocap::render::Take::from_record(&rec, &mcap).unwrap();
+    let m = measure("synthetic", &take.model, &take.world_from_model, &take.scales, None, &take.q);
+    // `export --mesh`: posed OBJ files, closed, as many vertices as the asset
+    let out = dir.join("mesh");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_smocap"))
+        .args(["export", mcap.to_str().unwrap(), "--mesh", out.to_str().unwrap(), "--frames", "0,50"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for f in [0, 50] {
+        let text = std::fs::read_to_string(out.join(format!("walk01_{f}.obj"))).unwrap();
+        assert_eq!(text.lines().filter(|l| l.starts_with("v ")).count(), 13_380);
+        assert_eq!(text.lines().filter(|l| l.starts_with("f ")).count(), 26_756);
+    }
+    assert!(m.stature_error.abs() < 0.01, "{}", m.stature_error);
+    assert!(m.inside.0 as f64 >= 0.999 * m.inside.1 as f64, "{:?}", m.inside);
+    assert!(m.edge_in_range >= 0.999, "{}", m.edge_in_range);
+    assert!(m.volume_min > 0.9 && m.volume_max < 1.1, "{} {}", m.volume_min, m.volume_max);
+    let _ = (m.edge_min, m.edge_max);
+}
+
+#[test]
+fn body_follows_the_rajagopal_walk() {
+    let model_path = shared("datasets/rajagopal2016_walk/Rajagopal2016.osim");
+    let mot = shared("reference/opensim-4.6/rajagopal2016_walk/motion_capture_walk_ik.mot");
+    let scale_path = shared("reference/opensim-4.6/rajagopal2016_walk/scaleSet_applied_walk.xml");
+    if !model_path.exists() || !mot.exists() || !scale_path.exists() {
+        eprintln!("skipped: the shared Rajagopal files are absent");
+        return;
+    }
+    let text = std::fs::read_to_string(&model_path).unwrap();
+    let (model, _) = smocap::io::osim::parse_osim(&text, "Rajagopal2016.osim").unwrap();
+    let mut scales = vec![1.0; 3 * model.nb()];
+    for (seg, s) in scale_set(&scale_path) {
+        if let Some(b) = model.body_index(&seg) {
+            scales[3 * b..3 * b + 3].copy_from_slice(&s);
+        }
+    }
+    let table = smocap::io::sto::read_sto(&mot).unwrap();
+    let deg = table.in_degrees().unwrap_or(true);
+    let cols: Vec<Option<usize>> = model.coordinates.iter().map(|c| table.column(&c.name)).collect();
+    let default = model.default_state();
+    let frames: Vec<Vec<f64>> = table
+        .rows
+        .iter()
+        .map(|row| {
+            model
+                .coordinates
+                .iter()
+                .zip(&cols)
+                .enumerate()
+                .map(|(i, (c, col))| match col {
+                    Some(k) if deg && c.kind != smocap::model::CoordinateKind::Translational => row[*k].to_radians(),
+                    Some(k) => row[*k],
+                    None => default[i],
+                })
+                .collect()
+        })
+        .collect();
+    // OpenSim models are Y up
+    let y_up = smocap::model::math::quaternion(&nalgebra::Vector3::x_axis(), std::f64::consts::FRAC_PI_2);
+    let m = measure("rajagopal walk", &model, &y_up, &scales, None, &frames);
+    assert!(m.stature_error.abs() < 0.01, "{}", m.stature_error);
+    assert!(m.inside.0 as f64 >= 0.999 * m.inside.1 as f64, "{:?}", m.inside);
+    assert!(m.edge_in_range >= 0.999, "{}", m.edge_in_range);
+    assert!(m.volume_min > 0.9 && m.volume_max < 1.1, "{} {}", m.volume_min, m.volume_max);
+}
