@@ -15,8 +15,8 @@ fn displace(t: &mut MarkerTrial, names: &[&str], frames: std::ops::Range<usize>,
     for name in names {
         let m = t.labels.iter().position(|l| l == name).unwrap_or_else(|| panic!("{name} in {:?}", t.labels));
         for f in frames.clone() {
-            for k in 0..3 {
-                t.positions[(f * nm + m) * 3 + k] += by[k];
+            for (x, d) in t.positions[(f * nm + m) * 3..(f * nm + m) * 3 + 3].iter_mut().zip(by) {
+                *x += d;
             }
         }
     }
