@@ -142,6 +142,7 @@ pub fn solve_judged(
         notes.push(format!("{name}: {} outlier frames improved by pre-solve", r.presolved.len()));
     }
     notes.extend(r.marker_errors.lines(name));
+    notes.extend(r.marker_errors.unfittable.iter().map(|u| format!("warning: {name}: {}", u.why)));
     let mut report = trial_report(ctx, &r, truth);
     report.input = Some(input.clone());
     // Suspect: the trial's frames (mostly at the iteration cap) or its subject's calibration.

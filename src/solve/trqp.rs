@@ -139,6 +139,27 @@ impl<'e> FrameSolver<'e> {
         self.qp.name()
     }
 
+    /// Narrows the range of every rotational proxy `k` to `centre[k] ± radius[k]` (rad), within
+    /// its own range, until [`FrameSolver::reset_ranges`]: a step bounded from the course of the
+    /// motion (the continuity of `pipeline::running::continuity`).
+    pub fn bound_rotations(&mut self, centre: &[f64], radius: &[f64]) {
+        for (k, px) in self.eval.proxy.proxies.iter().enumerate() {
+            if px.kind == ProxyKind::Rotation && radius[k].is_finite() {
+                let (lo, hi) = ((centre[k] - radius[k]).max(px.range.0), (centre[k] + radius[k]).min(px.range.1));
+                if lo <= hi {
+                    (self.lo[k], self.hi[k]) = (lo, hi);
+                }
+            }
+        }
+    }
+
+    /// The proxy ranges back to the model's.
+    pub fn reset_ranges(&mut self) {
+        for (k, px) in self.eval.proxy.proxies.iter().enumerate() {
+            (self.lo[k], self.hi[k]) = px.range;
+        }
+    }
+
     /// Clamps `p` into the proxy ranges.
     pub fn clamp(&self, p: &mut [f64]) {
         for (k, v) in p.iter_mut().enumerate() {

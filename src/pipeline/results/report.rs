@@ -75,6 +75,14 @@ pub struct TrialReport {
     /// ([`crate::pipeline::running::marker_errors`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub marker_errors: Option<crate::pipeline::running::marker_errors::MarkerErrorTable>,
+    /// Runs of frames no pose fits (RMSE far above the trial's), their worst markers and whether
+    /// the data or the model is to blame ([`crate::pipeline::running::unfittable`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unfittable: Vec<crate::pipeline::running::unfittable::Unfittable>,
+    /// What the verdict says beyond the status, for a trial that did not fail: "the data is bad
+    /// here: …" for runs of unfittable frames blamed on the data.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
 }
 
 /// Totals over the run.
@@ -273,6 +281,8 @@ impl Report {
             plausibility: None,
             label_qc: None,
             marker_errors: None,
+            unfittable: Vec::new(),
+            reason: None,
         }
     }
 
@@ -360,6 +370,8 @@ pub fn trial_report(ctx: &Context, r: &TrialResult, truth: Option<&Truth>) -> Tr
         plausibility: Some(pose_plausibility(ctx, r)),
         label_qc: None,
         marker_errors: Some(r.marker_errors.clone()),
+        unfittable: r.marker_errors.unfittable.clone(),
+        reason: crate::pipeline::running::unfittable::reason(&r.marker_errors.unfittable),
     }
 }
 

@@ -55,6 +55,65 @@ pub fn max_jump(proxy: &ProxyMap, a: &[f64], b: &[f64]) -> (f64, Option<usize>) 
     out
 }
 
+/// Slowest joint speed (rad/s, 500°/s) a frame may reach before its jump is weighed, whatever the
+/// trial's own motion: the floor of [`JumpLimits::bound_rad`].
+pub const SPEED_FLOOR_RAD_S: f64 = 500.0 * std::f64::consts::PI / 180.0;
+/// How many times the trial's 99th percentile of frame-to-frame changes a frame may move.
+pub const TRIAL_JUMP_FACTOR: f64 = 2.0;
+/// A continued (bounded) pose is taken when its marker RMSE is at most this many times the
+/// free pose's: no pose fits such a frame, so the one continuing the motion is as good.
+pub const CONTINUED_FIT_RATIO: f64 = 1.5;
+
+/// What the continuity of unfittable frames ([`crate::pipeline::running::lanes::resolve_unfittable_jumps`])
+/// allows a trial (`docs/KINEMATICS.md`, "Jumps in unfittable frames").
+#[derive(Clone, Debug)]
+pub struct JumpLimits {
+    /// Per proxy, the largest change (rad) from the course of the motion a frame may take in a
+    /// rotational proxy: `max(TRIAL_JUMP_FACTOR × P99 of that proxy's frame-to-frame changes over
+    /// the trial, SPEED_FLOOR_RAD_S / rate)`; infinite for the others.
+    pub bound_rad: Vec<f64>,
+    /// A frame's marker RMSE above this (m) is unfittable ([`crate::pipeline::running::unfittable`]).
+    pub unfittable_m: f64,
+}
+
+impl JumpLimits {
+    /// The limits of a trial at `rate_hz` from its solved frames' proxies and RMSEs (m), in frame
+    /// order (`None`: not solved).
+    pub fn of(proxy: &ProxyMap, rate_hz: f64, frames: &[Option<(&[f64], f64)>]) -> JumpLimits {
+        use crate::pipeline::running::unfittable::{RMSE_FACTOR, RMSE_FLOOR_MM};
+        let mut rmse: Vec<f64> = frames.iter().flatten().map(|f| f.1).filter(|r| r.is_finite()).collect();
+        let median = crate::solve::median(&mut rmse);
+        let rate = if rate_hz.is_finite() && rate_hz > 0.0 { rate_hz } else { 100.0 };
+        let floor = SPEED_FLOOR_RAD_S / rate;
+        let mut steps = Vec::with_capacity(frames.len());
+        let bound_rad = (0..proxy.np())
+            .map(|k| {
+                if proxy.proxies[k].kind != ProxyKind::Rotation {
+                    return f64::INFINITY;
+                }
+                steps.clear();
+                steps.extend(frames.windows(2).filter_map(|w| match (w[0], w[1]) {
+                    (Some(a), Some(b)) => Some(wrap_angle(b.0[k] - a.0[k]).abs()).filter(|d| d.is_finite()),
+                    _ => None,
+                }));
+                steps.sort_by(f64::total_cmp);
+                let p99 =
+                    if steps.is_empty() { 0.0 } else { steps[((steps.len() - 1) as f64 * 0.99).round() as usize] };
+                (TRIAL_JUMP_FACTOR * p99).max(floor)
+            })
+            .collect();
+        JumpLimits {
+            bound_rad,
+            unfittable_m: if median.is_finite() { (RMSE_FACTOR * median).max(RMSE_FLOOR_MM * 1e-3) } else { f64::NAN },
+        }
+    }
+
+    /// Whether `p` departs from `centre` by more than its bound in some rotational proxy.
+    pub fn departs(&self, centre: &[f64], p: &[f64]) -> bool {
+        self.bound_rad.iter().enumerate().any(|(k, b)| b.is_finite() && wrap_angle(p[k] - centre[k]).abs() > *b)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -17,7 +17,7 @@
 use crate::io::MarkerTrial;
 use crate::kinematics::assembly::{fold_tracking_reference, Evaluator, FrameProblem};
 use crate::kinematics::backend::{BackendError, BatchBackend, EnergyEval, GnSink, GnView};
-use crate::pipeline::running::continuity::{max_jump, FLIP_RAD};
+use crate::pipeline::running::continuity::{max_jump, JumpLimits, CONTINUED_FIT_RATIO, FLIP_RAD};
 use crate::solve::init::multi_start_with;
 use crate::solve::presolve::outlier_threshold;
 use crate::solve::trqp::{FrameIteration, Next};
@@ -402,6 +402,83 @@ pub fn resolve_flips(
             kept.push(f);
         } else {
             r.2 += spent;
+        }
+    }
+    kept
+}
+
+/// Jumps in unfittable frames (`docs/KINEMATICS.md`, "Jumps in unfittable frames"): in a run of
+/// solved frames whose marker RMSE exceeds `limits.unfittable_m` (bridged frames inside it
+/// neither end nor break it), a frame whose pose departs from the course of the motion (the
+/// linear interpolation between the solved frames just before and after the run, or the one
+/// there is) by more than its `limits.bound_rad` in some rotational proxy is solved again from that
+/// course with every rotational proxy bounded to it ± its `limits.bound_rad`; the continued pose is
+/// kept when its RMSE is at most [`CONTINUED_FIT_RATIO`] times the free pose's. Fittable frames
+/// are never touched (a clean fast swing is followed). Deterministic, in frame order, on the CPU.
+pub fn resolve_unfittable_jumps(
+    eval: &Evaluator<'_>,
+    settings: &SolverSettings,
+    inp: &TrialInputs<'_>,
+    limits: &JumpLimits,
+    results: &mut [Option<FrameResult>],
+) -> Vec<usize> {
+    let mut kept = Vec::new();
+    let n = results.len();
+    let bad = |r: &Option<FrameResult>| solved(r).is_some_and(|r| r.1.rmse_m > limits.unfittable_m);
+    let mut lane: Option<Lane<'_>> = None;
+    let mut centre = vec![0.0; eval.proxy.np()];
+    let mut f = 0;
+    while f < n {
+        if !bad(&results[f]) {
+            f += 1;
+            continue;
+        }
+        let a = f;
+        while f < n && (bad(&results[f]) || solved(&results[f]).is_none()) {
+            f += 1;
+        }
+        let before = (0..a).rev().find(|&g| solved(&results[g]).is_some());
+        let after = (f..n).find(|&g| solved(&results[g]).is_some());
+        for g in a..f {
+            let Some((p, old, _)) = solved(&results[g]) else { continue };
+            let pose = |h: usize| &results[h].as_ref().expect("a solved frame").0;
+            match (before, after) {
+                (Some(x), Some(y)) => {
+                    let t = (g - x) as f64 / (y - x) as f64;
+                    for (k, c) in centre.iter_mut().enumerate() {
+                        *c = pose(x)[k] + t * (pose(y)[k] - pose(x)[k]);
+                    }
+                }
+                (Some(x), None) | (None, Some(x)) => centre.copy_from_slice(pose(x)),
+                (None, None) => break,
+            }
+            if !limits.departs(&centre, p) {
+                continue;
+            }
+            let old_rmse = old.rmse_m;
+            let lane = lane.get_or_insert_with(|| Lane::new(eval, settings));
+            lane.prev = Some(centre.clone());
+            lane.prev2 = None;
+            lane.frame = g;
+            lane.start_frame(inp, false);
+            lane.solver.bound_rotations(&centre, &limits.bound_rad);
+            let frame = FrameProblem {
+                observed: &lane.obs,
+                marker_weights: inp.marker_weights,
+                tracking_ref: &lane.reference,
+                tracking_weights: inp.tracking_weights_all,
+            };
+            let stats = lane.solver.solve(&frame, &mut lane.p);
+            lane.solver.reset_ranges();
+            lane.it = None;
+            let spent = lane.started.elapsed().as_secs_f64();
+            let r = results[g].as_mut().expect("a solved frame");
+            if stats.status != FrameStatus::TooFewMarkers && stats.rmse_m <= CONTINUED_FIT_RATIO * old_rmse {
+                *r = (lane.p.clone(), stats, r.2 + spent);
+                kept.push(g);
+            } else {
+                r.2 += spent;
+            }
         }
     }
     kept

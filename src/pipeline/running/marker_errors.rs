@@ -5,6 +5,7 @@
 use crate::kinematics::Workspace;
 use crate::model::MarkerClass;
 use crate::pipeline::context::Context;
+use crate::pipeline::running::unfittable::{unfittable_runs, FrameFit};
 use crate::solve::Calibration;
 use serde::{Deserialize, Serialize};
 
@@ -39,6 +40,10 @@ pub struct MarkerErrorTable {
     pub tracking: Vec<MarkerError>,
     /// Frames with the largest marker RMSE, worst first.
     pub worst_frames: Vec<WorstFrame>,
+    /// Runs of frames the model could not fit ([`crate::pipeline::running::unfittable`]); the
+    /// report lists them as the trial's `unfittable`.
+    #[serde(skip)]
+    pub unfittable: Vec<crate::pipeline::running::unfittable::Unfittable>,
 }
 
 /// Accumulates the table frame by frame.
@@ -51,6 +56,8 @@ pub struct MarkerErrors {
     acc: Vec<(usize, f64, f64, usize)>,
     /// Per solved frame: (RMSE, frame, worst marker, its error).
     frames: Vec<(f64, usize, usize, f64)>,
+    /// Per solved frame, in frame order: its fit for [`crate::pipeline::running::unfittable`].
+    fits: Vec<FrameFit>,
 }
 
 impl MarkerErrors {
@@ -64,6 +71,7 @@ impl MarkerErrors {
             kin: Workspace::new(&ctx.model),
             acc: vec![(0, 0.0, 0.0, 0); nm],
             frames: Vec::new(),
+            fits: Vec::new(),
             ctx,
         }
     }
@@ -77,6 +85,7 @@ impl MarkerErrors {
         self.ctx.proxy.apply(proxies, &mut self.y, &mut self.dphi);
         crate::kinematics::cpu::forward(&self.ctx.model, &self.y, &mut self.kin);
         let (mut sq, mut n, mut worst) = (0.0, 0, (0, f64::NEG_INFINITY));
+        let mut top = [(usize::MAX, f64::NEG_INFINITY); 3];
         for (m, a) in self.acc.iter_mut().enumerate() {
             let o = &observed[3 * m..3 * m + 3];
             if self.ctx.marker_weights[m] <= 0.0 || o.iter().any(|v| !v.is_finite()) {
@@ -94,10 +103,34 @@ impl MarkerErrors {
             if d > worst.1 {
                 worst = (m, d);
             }
+            if let Some(k) = top.iter().position(|t| d > t.1) {
+                top.copy_within(k..2, k + 1);
+                top[k] = (m, d);
+            }
         }
         if n > 0 {
-            self.frames.push(((sq / n as f64).sqrt(), f, worst.0, worst.1));
+            let rmse = (sq / n as f64).sqrt();
+            self.frames.push((rmse, f, worst.0, worst.1));
+            let rigid_move = self.rigid_move(worst.0, observed);
+            self.fits.push(FrameFit { frame: f, rmse, top, rigid_move });
         }
+    }
+
+    /// How far marker `m` moved against the observed markers on its own body (m): the largest
+    /// difference between an observed distance and the model's (rigid) one.
+    fn rigid_move(&self, m: usize, observed: &[f64]) -> f64 {
+        let markers = &self.ctx.model.markers;
+        let (k, o) = (&self.kin.markers, &observed[3 * m..3 * m + 3]);
+        let mut out = 0.0f64;
+        for q in (0..markers.len()).filter(|&q| q != m && markers[q].body == markers[m].body) {
+            let oq = &observed[3 * q..3 * q + 3];
+            if self.ctx.marker_weights[q] <= 0.0 || oq.iter().any(|v| !v.is_finite()) {
+                continue;
+            }
+            let dist = |a: &[f64], b: &[f64]| (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();
+            out = out.max((dist(o, oq) - dist(&k[3 * m..3 * m + 3], &k[3 * q..3 * q + 3])).abs());
+        }
+        out
     }
 
     /// The table.
@@ -120,6 +153,8 @@ impl MarkerErrors {
                 MarkerClass::Tracking => t.tracking.push(e),
             }
         }
+        let names: Vec<String> = self.ctx.model.markers.iter().map(|m| m.name.clone()).collect();
+        t.unfittable = unfittable_runs(&self.fits, &names);
         self.frames.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
         t.worst_frames = self
             .frames

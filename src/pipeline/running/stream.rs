@@ -17,8 +17,10 @@ use crate::pipeline::context::Context;
 use crate::pipeline::input::frames::{for_each_window, TrialFrames};
 use crate::pipeline::input::matching::MarkerMatch;
 use crate::pipeline::input::trial::{match_markers, no_match, GapRuns, SinkError, TrialError};
+use crate::pipeline::running::continuity::JumpLimits;
 use crate::pipeline::running::lanes::{
-    resolve_flips, resolve_outliers_above, run_lanes_across, FrameObservations, FrameResult, TrialInputs,
+    resolve_flips, resolve_outliers_above, resolve_unfittable_jumps, run_lanes_across, FrameObservations, FrameResult,
+    TrialInputs,
 };
 use crate::pipeline::running::order::Orderer;
 use crate::pipeline::running::sink::{FrameSink, SolvedFrame, Stop};
@@ -385,12 +387,19 @@ fn presolve_pass(
     base: &SubjectInputs<'_>,
 ) -> Result<(), Stop> {
     let threshold = outlier_threshold_of(&job.held);
+    let fits: Vec<Option<(&[f64], f64)>> = job
+        .held
+        .iter()
+        .map(|r| r.as_ref().filter(|r| r.1.status != FrameStatus::TooFewMarkers).map(|r| (&r.0[..], r.1.rmse_m)))
+        .collect();
+    let limits = JumpLimits::of(eval.proxy, job.trial.header().rate_hz, &fits);
     for &(g0, g1) in &job.groups {
         let (w0, w, rel) = window(job.trial, &job.bounds[g0..g1]).map_err(Stop::Read)?;
         let obs = FrameObservations { trial: &w, map: &matched.columns };
         let inputs = base.inputs(obs);
         let end = job.bounds[g1 - 1].1;
         let mut kept = resolve_outliers_above(eval, settings, &inputs, &rel, threshold, &mut job.held[w0..end]);
+        kept.extend(resolve_unfittable_jumps(eval, settings, &inputs, &limits, &mut job.held[w0..end]));
         kept.extend(resolve_flips(eval, settings, &inputs, &mut job.held[w0..end]));
         kept.sort_unstable();
         kept.dedup();
