@@ -115,6 +115,15 @@ fn body_follows_a_synthetic_trial_of_the_shipped_model() {
     let rec = smocap::archive::export::read_trial_record(&mcap).unwrap();
     let take = smocap::render::Take::from_record(&rec, &mcap).unwrap();
     let m = measure("synthetic", &take.model, &take.world_from_model, &take.scales, None, &take.q);
+    // the converted file carries the calibrated stature; the body is shaped to it
+    let stature = rec.subject_stature_m.expect("smocap.run carries subject_stature_m");
+    let sub = smocap::body::SubjectBody { stature_m: Some(stature), info: rec.subject_info };
+    let asset = BodyAsset::shipped().unwrap();
+    let (body, line) =
+        smocap::body::dress_subject(&take.model, &take.world_from_model, &asset, &take.scales, &sub).unwrap();
+    eprintln!("synthetic: {line}");
+    assert_eq!(body.target_stature, stature);
+    assert!((body.bind_pose_height(&take.model, &take.scales) - stature).abs() < 0.01, "{line}");
     // `export --mesh`: posed OBJ files, closed, as many vertices as the asset
     let out = dir.join("mesh");
     let o = std::process::Command::new(env!("CARGO_BIN_EXE_smocap"))
