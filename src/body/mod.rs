@@ -24,6 +24,7 @@ pub mod metrics;
 pub mod obj;
 pub mod pose;
 pub mod segments;
+pub mod skin_distance;
 pub mod subject;
 
 pub use asset::{BodyAsset, BodyError, BodyShape, Phenotype, Skin};

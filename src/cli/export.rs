@@ -6,7 +6,7 @@ use clap::Args;
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
-#[command(group(clap::ArgGroup::new("outputs").required(true).multiple(true).args(["mot", "csv", "gltf", "mesh"])))]
+#[command(group(clap::ArgGroup::new("outputs").required(true).multiple(true).args(["mot", "csv", "gltf", "mesh", "skin_report"])))]
 pub struct ExportArgs {
     /// An MCAP file written by `smocap convert`.
     pub file: PathBuf,
@@ -26,6 +26,11 @@ pub struct ExportArgs {
     /// into this folder (metres, the Z-up world of `project`).
     #[arg(long)]
     pub mesh: Option<PathBuf>,
+    /// Write the model markers' signed distances to the subject's posed skin over every frame
+    /// (JSON): per marker the median and 90th percentile of |distance − 7 mm| (a marker's radius),
+    /// and pooled over landmark (anatomical) markers and the others.
+    #[arg(long, value_name = "FILE.json")]
+    pub skin_report: Option<PathBuf>,
     /// Trial frame numbers for `--mesh`, comma-separated (default: the first frame).
     #[arg(long, value_delimiter = ',', requires = "mesh")]
     pub frames: Vec<usize>,
@@ -75,9 +80,12 @@ pub fn run(a: ExportArgs) -> anyhow::Result<u8> {
     let rec = read_trial_record(&a.file)?;
     if let Some(dir) = &a.mesh {
         write_meshes(&rec, &a.file, dir, &a.frames)?;
-        if a.mot.is_none() && a.csv.is_none() && a.gltf.is_none() {
-            return Ok(0);
-        }
+    }
+    if let Some(out) = &a.skin_report {
+        super::skin_report::write(&rec, &a.file, out, subject_body(&rec))?;
+    }
+    if a.mot.is_none() && a.csv.is_none() && a.gltf.is_none() {
+        return Ok(0);
     }
     if let Some(out) = &a.gltf {
         let take = crate::render::Take::from_record(&rec, &a.file)?;
@@ -143,7 +151,7 @@ pub(super) fn dress_or_note(
 }
 
 /// What the trial's file says of its subject for the body mesh.
-fn subject_body(rec: &crate::archive::export::TrialRecord) -> crate::body::SubjectBody {
+pub(super) fn subject_body(rec: &crate::archive::export::TrialRecord) -> crate::body::SubjectBody {
     crate::body::SubjectBody { stature_m: rec.subject_stature_m, info: rec.subject_info }
 }
 
