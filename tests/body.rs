@@ -115,6 +115,15 @@ fn body_follows_a_synthetic_trial_of_the_shipped_model() {
     let rec = smocap::archive::export::read_trial_record(&mcap).unwrap();
     let take = smocap::render::Take::from_record(&rec, &mcap).unwrap();
     let m = measure("synthetic", &take.model, &take.world_from_model, &take.scales, None, &take.q);
+    // the converted file carries the calibrated stature; the body is shaped to it
+    let stature = rec.subject_stature_m.expect("smocap.run carries subject_stature_m");
+    let sub = smocap::body::SubjectBody { stature_m: Some(stature), info: rec.subject_info };
+    let asset = BodyAsset::shipped().unwrap();
+    let (body, line) =
+        smocap::body::dress_subject(&take.model, &take.world_from_model, &asset, &take.scales, &sub).unwrap();
+    eprintln!("synthetic: {line}");
+    assert_eq!(body.target_stature, stature);
+    assert!((body.bind_pose_height(&take.model, &take.scales) - stature).abs() < 0.01, "{line}");
     // `export --mesh`: posed OBJ files, closed, as many vertices as the asset
     let out = dir.join("mesh");
     let o = std::process::Command::new(env!("CARGO_BIN_EXE_smocap"))
@@ -179,4 +188,57 @@ fn body_follows_the_rajagopal_walk() {
     assert!(m.inside.0 as f64 >= 0.999 * m.inside.1 as f64, "{:?}", m.inside);
     assert!(m.edge_in_range >= 0.999, "{}", m.edge_in_range);
     assert!(m.volume_min > 0.9 && m.volume_max < 1.1, "{} {}", m.volume_min, m.volume_max);
+}
+
+/// `export --skin-report` on `mcap`: prints each marker's signed distance to the skin and the
+/// pooled |distance − 7 mm| of landmarks and others; returns the report.
+fn skin_report(name: &str, mcap: &std::path::Path, out: &std::path::Path) -> serde_json::Value {
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_smocap"))
+        .args(["export", mcap.to_str().unwrap(), "--skin-report", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out).unwrap()).unwrap();
+    let frames = r["frames"].as_u64().unwrap();
+    for m in r["markers"].as_array().unwrap() {
+        eprintln!(
+            "{name}: {:<20} {:<10} {:<9} signed median {:>6} mm, |d − 7 mm| median {:>5} p90 {:>5} mm",
+            m["marker"].as_str().unwrap(),
+            m["body"].as_str().unwrap(),
+            if m["computed"] == true { "computed" } else if m["landmark"] == true { "landmark" } else { "other" },
+            m["median_signed_mm"],
+            m["median_off_skin_mm"],
+            m["p90_off_skin_mm"]
+        );
+        // sanity: every marker measured at every frame, a finite distance within half a metre
+        assert_eq!(m["frames"].as_u64().unwrap(), frames, "{m}");
+        assert!(m["median_signed_mm"].as_f64().is_some_and(|d| d.abs() < 500.0), "{m}");
+    }
+    for g in ["landmarks", "others", "computed_points"] {
+        eprintln!("{name}: {g}: {}", r[g]);
+    }
+    assert!(r["landmarks"]["markers"].as_u64().unwrap() > 0);
+    r
+}
+
+#[test]
+fn markers_against_the_skin() {
+    let dir = std::env::temp_dir().join(format!("smocap-body-skin-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let mcap = converted_synthetic(&dir, 60);
+    skin_report("synthetic", &mcap, &dir.join("skin-synthetic.json"));
+    if !shared("datasets/rajagopal2016_walk/Rajagopal2016.osim").exists() {
+        eprintln!("skipped Rajagopal: the shared files are absent");
+        return;
+    }
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_smocap"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["convert", "datasets.toml", "--dataset", "rajagopal2016_walk", "--quiet", "--out"])
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mcap = dir.join("out/rajagopal2016_walk/motion_capture_walk.mcap");
+    skin_report("rajagopal walk", &mcap, &dir.join("skin-rajagopal.json"));
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -2,7 +2,7 @@
 
 import os
 import pathlib
-from typing import Any, Callable, Dict, Iterable, List, Optional, Union, final
+from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple, Union, final
 
 import numpy as np
 import numpy.typing as npt
@@ -279,6 +279,10 @@ class Trial:
         for files written without it."""
     def to_mot(self, path: _PathLike) -> None:
         """Writes OpenSim's ``.mot`` as ``smocap export --mot`` does."""
+    def body(self) -> Tuple[np.ndarray, np.ndarray]:
+        """The subject's body mesh posed at every frame (as ``smocap export --mesh``):
+        ``(vertices, faces)``, vertices float32 (frames, V, 3) in the Z-up world (m), faces
+        uint32 (F, 3), counter-clockwise seen from outside."""
     def __len__(self) -> int: ...
 
 def convert(

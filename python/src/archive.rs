@@ -202,6 +202,40 @@ impl Trial {
         .map_err(to_py::<ArchiveError>)
     }
 
+    /// The subject's body mesh posed at every frame, as `smocap export --mesh` poses it (shaped
+    /// to the subject's calibrated stature, sex and mass): `(vertices, faces)`, vertices float32
+    /// of shape (frames, V, 3) in the Z-up world (m), faces uint32 of shape (F, 3), counter-
+    /// clockwise seen from outside.
+    fn body<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        let (v, faces, frames, nv) = py
+            .detach(|| -> Result<_, String> {
+                let take = smocap::render::Take::from_record(&self.rec, &self.path).map_err(|e| e.to_string())?;
+                let asset = smocap::body::BodyAsset::shipped().map_err(|e| e.to_string())?;
+                let sub = smocap::body::SubjectBody { stature_m: self.rec.subject_stature_m, info: self.rec.subject_info };
+                let (body, _) =
+                    smocap::body::dress_subject(&take.model, &take.world_from_model, &asset, &take.scales, &sub)
+                        .map_err(|e| format!("binding the body mesh to the trial's model: {e}"))?;
+                let mut ws = smocap::body::PoseWorkspace::new(&take.model, &body);
+                let nq = take.model.nq();
+                let mut y = vec![0.0; take.model.ny()];
+                y[nq..].copy_from_slice(&take.scales);
+                let nv = body.binding.influences.len();
+                let mut v: Vec<f32> = Vec::with_capacity(take.q.len() * nv * 3);
+                for q in &take.q {
+                    y[..nq].copy_from_slice(&q[..nq]);
+                    body.pose(&take.model, &y, &mut ws);
+                    v.extend(ws.vertices.iter().flatten());
+                }
+                let faces: Vec<u32> = body.triangles.iter().flatten().copied().collect();
+                Ok((v, faces, take.q.len(), nv))
+            })
+            .map_err(PyErr::new::<ArchiveError, _>)?;
+        let nf = faces.len() / 3;
+        let v = PyArray1::from_vec(py, v).reshape([frames, nv, 3])?.into_any();
+        let f = PyArray1::from_vec(py, faces).reshape([nf, 3])?.into_any();
+        Ok((v, f))
+    }
+
     fn __len__(&self) -> usize {
         self.rec.frames.len()
     }

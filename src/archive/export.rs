@@ -74,6 +74,10 @@ pub struct TrialRecord {
     pub stats: BTreeMap<usize, proto::SolverStats>,
     /// The `/smocap/label_qc` message, when the file has one.
     pub label_qc: Option<proto::LabelQc>,
+    /// What the body mesh is shaped to: the calibrated stature and the given subject
+    /// (`smocap.run` → `subject_stature_m`, `subject_height_m`, `subject_mass_kg`, `subject_sex`).
+    pub subject_stature_m: Option<f64>,
+    pub subject_info: crate::model::anthropometry::SubjectInfo,
 }
 
 /// Reads the frames of `path` (a file written by `smocap convert`: protobuf channels, or the
@@ -92,6 +96,7 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
     let bad = |what: String| ExportError::Content { file: file.clone(), what };
     let summary = mcap::Summary::read(buf).map_err(mc)?;
     let (mut time_offset, mut scaled_model, mut model_source) = (0.0, None, None);
+    let (mut subject_stature_m, mut subject_info) = (None, crate::model::anthropometry::SubjectInfo::default());
     if let Some(summary) = &summary {
         for idx in &summary.metadata_indexes {
             let m = mcap::read::metadata(buf, idx).map_err(mc)?;
@@ -102,6 +107,11 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
                 time_offset = v.parse().map_err(|_| bad(format!("first_sample_time_s '{v}' is not a number")))?;
             }
             model_source = m.metadata.get("model").cloned();
+            let num = |k: &str| m.metadata.get(k).and_then(|v| v.parse::<f64>().ok()).filter(|v| v.is_finite());
+            subject_stature_m = num("subject_stature_m");
+            subject_info.height_m = num("subject_height_m");
+            subject_info.mass_kg = num("subject_mass_kg");
+            subject_info.sex = m.metadata.get("subject_sex").and_then(|v| v.parse().ok());
         }
         for a in &summary.attachment_indexes {
             let compressed = match a.name.as_str() {
@@ -206,6 +216,8 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
         subject,
         stats,
         label_qc,
+        subject_stature_m,
+        subject_info,
     })
 }
 

@@ -24,8 +24,11 @@ pub mod metrics;
 pub mod obj;
 pub mod pose;
 pub mod segments;
+pub mod skin_distance;
+pub mod subject;
 
 pub use asset::{BodyAsset, BodyError, BodyShape, Phenotype, Skin};
 pub use bind::{bind, Binding, Influence};
 pub use pose::{phenotype_for, Dressed, PoseWorkspace};
 pub use segments::{BindError, SegmentMap};
+pub use subject::{dress_subject, SubjectBody};

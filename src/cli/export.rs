@@ -6,7 +6,7 @@ use clap::Args;
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
-#[command(group(clap::ArgGroup::new("outputs").required(true).multiple(true).args(["mot", "csv", "gltf", "mesh"])))]
+#[command(group(clap::ArgGroup::new("outputs").required(true).multiple(true).args(["mot", "csv", "gltf", "mesh", "skin_report"])))]
 pub struct ExportArgs {
     /// An MCAP file written by `smocap convert`.
     pub file: PathBuf,
@@ -26,6 +26,11 @@ pub struct ExportArgs {
     /// into this folder (metres, the Z-up world of `project`).
     #[arg(long)]
     pub mesh: Option<PathBuf>,
+    /// Write the model markers' signed distances to the subject's posed skin over every frame
+    /// (JSON): per marker the median and 90th percentile of |distance − 7 mm| (a marker's radius),
+    /// and pooled over landmark (anatomical) markers and the others.
+    #[arg(long, value_name = "FILE.json")]
+    pub skin_report: Option<PathBuf>,
     /// Trial frame numbers for `--mesh`, comma-separated (default: the first frame).
     #[arg(long, value_delimiter = ',', requires = "mesh")]
     pub frames: Vec<usize>,
@@ -75,26 +80,19 @@ pub fn run(a: ExportArgs) -> anyhow::Result<u8> {
     let rec = read_trial_record(&a.file)?;
     if let Some(dir) = &a.mesh {
         write_meshes(&rec, &a.file, dir, &a.frames)?;
-        if a.mot.is_none() && a.csv.is_none() && a.gltf.is_none() {
-            return Ok(0);
-        }
+    }
+    if let Some(out) = &a.skin_report {
+        super::skin_report::write(&rec, &a.file, out, subject_body(&rec))?;
+    }
+    if a.mot.is_none() && a.csv.is_none() && a.gltf.is_none() {
+        return Ok(0);
     }
     if let Some(out) = &a.gltf {
         let take = crate::render::Take::from_record(&rec, &a.file)?;
         let cams = crate::render::cameras(&take, a.scene.cameras.as_deref(), a.scene.rig_seed)?;
         let body = match a.body {
             BodyKind::Capsules => None,
-            BodyKind::Mesh => {
-                let asset = crate::body::BodyAsset::shipped()?;
-                let scales = &take.scales;
-                match crate::body::Dressed::new(&take.model, &take.world_from_model, &asset, scales, None, Default::default()) {
-                    Ok(d) => Some(d),
-                    Err(e) => {
-                        eprintln!("note: the body mesh does not bind to this model ({e}); bones as capsules");
-                        None
-                    }
-                }
-            }
+            BodyKind::Mesh => dress_or_note(&take, &subject_body(&rec))?,
         };
         std::fs::write(out, crate::render::scene::glb_with_body(&take, &cams, a.scene.up, body.as_ref())?)
             .with_context(|| format!("writing {}", out.display()))?;
@@ -133,6 +131,30 @@ pub fn run(a: ExportArgs) -> anyhow::Result<u8> {
     Ok(0)
 }
 
+/// The subject's body on the take's model, its height against the stature on stderr; `None`,
+/// with a note, where the body does not bind to the model.
+pub(super) fn dress_or_note(
+    take: &crate::render::Take,
+    sub: &crate::body::SubjectBody,
+) -> anyhow::Result<Option<crate::body::Dressed>> {
+    let asset = crate::body::BodyAsset::shipped()?;
+    Ok(match crate::body::dress_subject(&take.model, &take.world_from_model, &asset, &take.scales, sub) {
+        Ok((d, line)) => {
+            eprintln!("{}: {line}", take.name);
+            Some(d)
+        }
+        Err(e) => {
+            eprintln!("note: the body mesh does not bind to this model ({e}); bones as capsules");
+            None
+        }
+    })
+}
+
+/// What the trial's file says of its subject for the body mesh.
+pub(super) fn subject_body(rec: &crate::archive::export::TrialRecord) -> crate::body::SubjectBody {
+    crate::body::SubjectBody { stature_m: rec.subject_stature_m, info: rec.subject_info }
+}
+
 /// The body posed at `frames` (trial frame numbers; the first frame if none) as OBJ files.
 fn write_meshes(
     rec: &crate::archive::export::TrialRecord,
@@ -141,11 +163,13 @@ fn write_meshes(
     frames: &[usize],
 ) -> anyhow::Result<()> {
     use anyhow::Context as _;
-    use crate::body::{BodyAsset, Dressed, Phenotype, PoseWorkspace};
+    use crate::body::{BodyAsset, PoseWorkspace};
     let take = crate::render::Take::from_record(rec, file)?;
     let asset = BodyAsset::shipped()?;
-    let body = Dressed::new(&take.model, &take.world_from_model, &asset, &take.scales, None, Phenotype::default())
-        .context("binding the body mesh to the trial's model")?;
+    let (body, line) =
+        crate::body::dress_subject(&take.model, &take.world_from_model, &asset, &take.scales, &subject_body(rec))
+            .context("binding the body mesh to the trial's model")?;
+    eprintln!("{}: {line}", take.name);
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let wanted = if frames.is_empty() { vec![*take.frames.first().unwrap_or(&0)] } else { frames.to_vec() };
     let mut ws = PoseWorkspace::new(&take.model, &body);

@@ -21,6 +21,7 @@ mod merge;
 mod preview;
 mod project;
 mod solve;
+mod skin_report;
 mod synth;
 
 use clap::{Parser, Subcommand};

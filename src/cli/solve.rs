@@ -97,6 +97,10 @@ pub struct SolveArgs {
     /// Seed of the default rig's perturbation of camera positions in the glTF scenes.
     #[arg(long, default_value_t = 0)]
     pub gltf_rig_seed: u64,
+    /// What the glTF scenes show of the subject (as `smocap export --body`): `mesh` (the body
+    /// mesh shaped to the subject and skinned to the body nodes) or `capsules` (bones).
+    #[arg(long, value_enum, default_value_t = super::export::BodyKind::Mesh)]
+    pub gltf_body: super::export::BodyKind,
     /// Pre-solve (root placement + root-to-leaf local fits before the trust-region QP): `never`;
     /// `auto` re-solves frames whose RMSE is an outlier of their trial (median + 6 MAD); `always`
     /// pre-solves every warm-started frame. Overrides the profile's `presolve` (default `auto`).
@@ -364,7 +368,12 @@ fn export(
             anyhow::ensure!(written.insert(path.clone()), "--gltf-dir: two trials would both write {}", path.display());
             let take = crate::render::Take::from_solve(ctx, r, trial)?;
             let cams = crate::render::cameras(&take, a.gltf_cameras.as_deref(), a.gltf_rig_seed)?;
-            std::fs::write(&path, crate::render::scene::glb(&take, &cams, a.gltf_up)?)
+            let sub = crate::body::SubjectBody { stature_m: calibration.and_then(|c| c.prior.stature_m), info: ctx.subject };
+            let body = match a.gltf_body {
+                super::export::BodyKind::Capsules => None,
+                super::export::BodyKind::Mesh => super::export::dress_or_note(&take, &sub)?,
+            };
+            std::fs::write(&path, crate::render::scene::glb_with_body(&take, &cams, a.gltf_up, body.as_ref())?)
                 .with_context(|| format!("writing {}", path.display()))?;
             eprintln!("wrote {}", path.display());
         }

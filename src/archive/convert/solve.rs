@@ -253,6 +253,19 @@ fn run_info(
         run.insert(k.into(), v.into());
     }
     run.insert("epoch_ns".into(), opt.writer.epoch_ns.to_string());
+    // what the body mesh is shaped to (`export --gltf/--mesh`): calibrated stature, given subject
+    let sub = &ctx.subject;
+    let sex = sub.sex.map(|s| if s == crate::model::anthropometry::Sex::Male { "male" } else { "female" });
+    for (k, v) in [
+        ("subject_stature_m", cal.calibration.prior.stature_m.map(|h| format!("{h}"))),
+        ("subject_height_m", sub.height_m.map(|h| format!("{h}"))),
+        ("subject_mass_kg", sub.mass_kg.map(|m| format!("{m}"))),
+        ("subject_sex", sex.map(String::from)),
+    ] {
+        if let Some(v) = v {
+            run.insert(k.into(), v);
+        }
+    }
     run
 }
 

@@ -1,0 +1,143 @@
+//! The body of a known subject: the shape chosen from the subject's stature, sex and mass, and
+//! its height against the stature.
+//!
+//! `gender` comes from sex (0.5 unknown); where the stature is known the mesh's `height` gives
+//! that stature (else [`Dressed::new`] sizes it from the scales); where the mass is known too,
+//! `weight` is chosen so that the shaped mesh's enclosed volume times [`BODY_DENSITY`] is the
+//! mass (about BMI: the volume at a given stature grows with `weight`). The shape is chosen
+//! before binding; the subject's scales then stretch it per segment, which is why the stature
+//! is asked of the bound body at those scales (two rounds in [`Dressed::new`]).
+
+use super::asset::{BodyAsset, Phenotype};
+use super::metrics::volume;
+use super::pose::{phenotype_for, Dressed, PoseWorkspace};
+use super::segments::BindError;
+use crate::model::anthropometry::SubjectInfo;
+use crate::model::Model;
+use nalgebra::UnitQuaternion;
+
+/// Whole-body density (kg/m³) turning the mesh's volume into mass: 1010, between the
+/// densities measured by underwater weighing with the lungs' residual air (about 1000–1070).
+pub const BODY_DENSITY: f64 = 1010.0;
+
+/// What is known of the subject for its body.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SubjectBody {
+    /// The calibrated stature (m; `Calibration.prior.stature_m`), else the given height.
+    pub stature_m: Option<f64>,
+    pub info: SubjectInfo,
+}
+
+impl SubjectBody {
+    /// The stature the body is shaped to: the calibrated one, else the subject's given height.
+    pub fn stature(&self) -> Option<f64> {
+        self.stature_m.or(self.info.height_m)
+    }
+}
+
+/// Mass (kg) of the dressed body at its bind pose and `scales`, at [`BODY_DENSITY`].
+pub fn posed_mass(model: &Model, body: &Dressed, scales: &[f64]) -> f64 {
+    let mut ws = PoseWorkspace::new(model, body);
+    body.pose(model, &body.bind_state(model, scales), &mut ws);
+    volume(&ws.vertices, &body.triangles) * BODY_DENSITY
+}
+
+/// Mass (kg) of a shape at [`BODY_DENSITY`].
+pub fn shape_mass(asset: &BodyAsset, p: &Phenotype) -> f64 {
+    let s = asset.shape_from(p);
+    let v: Vec<[f32; 3]> = s.vertices.iter().map(|v| [v.x as f32, v.y as f32, v.z as f32]).collect();
+    volume(&v, &asset.triangles) * BODY_DENSITY
+}
+
+/// The phenotype of a subject: `gender` from sex; with stature and mass, the `weight` whose shape
+/// at that stature has that mass (clamped to [0, 1]); `height` is left for [`Dressed::new`].
+pub fn phenotype_for_subject(asset: &BodyAsset, sub: &SubjectBody) -> Phenotype {
+    let base = phenotype_for(sub.info.sex);
+    let (Some(h), Some(m)) = (sub.stature(), sub.info.mass_kg) else { return base };
+    let mass_at = |w: f64| {
+        let p = Phenotype { weight: w, ..base };
+        asset.height_for_stature(&p, h).ok().map(|p| shape_mass(asset, &p))
+    };
+    let (Some(lo_m), Some(hi_m)) = (mass_at(0.0), mass_at(1.0)) else { return base };
+    let weight = if m <= lo_m {
+        0.0
+    } else if m >= hi_m {
+        1.0
+    } else {
+        let (mut lo, mut hi) = (0.0, 1.0);
+        for _ in 0..14 {
+            let mid = 0.5 * (lo + hi);
+            match mass_at(mid) {
+                Some(x) if x < m => lo = mid,
+                _ => hi = mid,
+            }
+        }
+        0.5 * (lo + hi)
+    };
+    Phenotype { weight, ..base }
+}
+
+/// The subject's body on `model` at `scales`, and a one-line summary of its height against
+/// the stature it was shaped to.
+pub fn dress_subject(
+    model: &Model,
+    world_from_model: &UnitQuaternion<f64>,
+    asset: &BodyAsset,
+    scales: &[f64],
+    sub: &SubjectBody,
+) -> Result<(Dressed, String), BindError> {
+    let mut p = phenotype_for_subject(asset, sub);
+    let mut body = Dressed::new(model, world_from_model, asset, scales, sub.stature(), p)?;
+    let mut mass = posed_mass(model, &body, scales);
+    // The subject's scales stretch the shape: with the mass known, `weight` is corrected on
+    // the posed body's mass (secant steps from the shape's mass slope; at most two).
+    if let Some(m) = sub.info.mass_kg.filter(|_| scales.len() == 3 * model.nb()) {
+        let lo = shape_mass(asset, &Phenotype { weight: 0.0, ..body.phenotype });
+        let hi = shape_mass(asset, &Phenotype { weight: 1.0, ..body.phenotype });
+        let mut slope = (hi - lo).max(1.0) * mass / shape_mass(asset, &body.phenotype).max(1.0);
+        let mut prev = (p.weight, mass);
+        for _ in 0..2 {
+            if (mass - m).abs() < 0.01 * m {
+                break;
+            }
+            let w = (p.weight + (m - mass) / slope).clamp(0.0, 1.0);
+            if (w - p.weight).abs() < 1e-4 {
+                break;
+            }
+            let q = Phenotype { weight: w, ..p };
+            let b = Dressed::new(model, world_from_model, asset, scales, sub.stature(), q)?;
+            let bm = posed_mass(model, &b, scales);
+            if (bm - prev.1).abs() > 1e-6 && (w - prev.0).abs() > 1e-6 {
+                slope = ((bm - prev.1) / (w - prev.0)).max(1.0);
+            }
+            prev = (w, bm);
+            if (bm - m).abs() < (mass - m).abs() {
+                (p, body, mass) = (q, b, bm);
+            } else {
+                break;
+            }
+        }
+    }
+    let height = body.bind_pose_height(model, scales);
+    let what = match (sub.stature_m, sub.info.height_m) {
+        (Some(_), _) => "calibrated stature",
+        (None, Some(_)) => "given height",
+        (None, None) => "stature of the mesh at the scales",
+    };
+    let mut line = format!(
+        "body: height {height:.4} m at the subject's scales, {what} {:.4} m ({:+.1} mm); gender {:.2}, weight {:.3}, height {:.3}",
+        body.target_stature,
+        1e3 * (height - body.target_stature),
+        p.gender,
+        body.phenotype.weight,
+        body.phenotype.height
+    );
+    line += &format!("; mass of the body {mass:.1} kg at {BODY_DENSITY} kg/m³");
+    if let Some(m) = sub.info.mass_kg {
+        line += &format!(" (subject {m:.1} kg)");
+    }
+    if let (Some(c), Some(g)) = (sub.stature_m, sub.info.height_m) {
+        line += &format!("; given height {g:.3} m ({:+.1} mm from the calibrated)", 1e3 * (g - c));
+    }
+    Ok((body, line))
+}
