@@ -205,7 +205,13 @@ fn skin_report(name: &str, mcap: &std::path::Path, out: &std::path::Path) -> ser
             "{name}: {:<20} {:<10} {:<9} signed median {:>6} mm, |d − 7 mm| median {:>5} p90 {:>5} mm",
             m["marker"].as_str().unwrap(),
             m["body"].as_str().unwrap(),
-            if m["computed"] == true { "computed" } else if m["landmark"] == true { "landmark" } else { "other" },
+            if m["computed"] == true {
+                "computed"
+            } else if m["landmark"] == true {
+                "landmark"
+            } else {
+                "other"
+            },
             m["median_signed_mm"],
             m["median_off_skin_mm"],
             m["p90_off_skin_mm"]

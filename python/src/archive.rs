@@ -211,7 +211,8 @@ impl Trial {
             .detach(|| -> Result<_, String> {
                 let take = smocap::render::Take::from_record(&self.rec, &self.path).map_err(|e| e.to_string())?;
                 let asset = smocap::body::BodyAsset::shipped().map_err(|e| e.to_string())?;
-                let sub = smocap::body::SubjectBody { stature_m: self.rec.subject_stature_m, info: self.rec.subject_info };
+                let sub =
+                    smocap::body::SubjectBody { stature_m: self.rec.subject_stature_m, info: self.rec.subject_info };
                 let (body, _) =
                     smocap::body::dress_subject(&take.model, &take.world_from_model, &asset, &take.scales, &sub)
                         .map_err(|e| format!("binding the body mesh to the trial's model: {e}"))?;

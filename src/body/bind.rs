@@ -45,8 +45,11 @@ enum Spine {
     Named(&'static str),
     Torso,
 }
-const SPINE: &[(Spine, &str, f64)] =
-    &[(Spine::Lowest, "joint-spine-4", 0.3), (Spine::Named("lumbar3"), "joint-spine-3", 0.3), (Spine::Torso, "joint-spine-2", 0.3)];
+const SPINE: &[(Spine, &str, f64)] = &[
+    (Spine::Lowest, "joint-spine-4", 0.3),
+    (Spine::Named("lumbar3"), "joint-spine-3", 0.3),
+    (Spine::Torso, "joint-spine-2", 0.3),
+];
 
 /// `(model body, joint cubes whose mean centre its origin goes to, weight)` for `model`.
 pub fn targets(model: &Model, map: &SegmentMap, asset: &BodyAsset) -> Vec<(usize, Vec<String>, f64)> {

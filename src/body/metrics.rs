@@ -3,8 +3,11 @@
 
 /// Each undirected edge of `triangles` once, `(lower, higher)` vertex index, sorted.
 pub fn edges(triangles: &[[u32; 3]]) -> Vec<(u32, u32)> {
-    let mut e: Vec<(u32, u32)> =
-        triangles.iter().flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]).map(|(a, b)| (a.min(b), a.max(b))).collect();
+    let mut e: Vec<(u32, u32)> = triangles
+        .iter()
+        .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+        .map(|(a, b)| (a.min(b), a.max(b)))
+        .collect();
     e.sort_unstable();
     e.dedup();
     e

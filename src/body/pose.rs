@@ -128,7 +128,13 @@ impl Dressed {
         Ok(best.expect("one round at least").1)
     }
 
-    fn from_binding(binding: Binding, phenotype: Phenotype, shape: &BodyShape, target: f64, asset: &BodyAsset) -> Dressed {
+    fn from_binding(
+        binding: Binding,
+        phenotype: Phenotype,
+        shape: &BodyShape,
+        target: f64,
+        asset: &BodyAsset,
+    ) -> Dressed {
         Dressed {
             binding,
             phenotype,
@@ -195,8 +201,8 @@ mod tests {
         let asset = BodyAsset::shipped().unwrap();
         let model = Context::shipped().unwrap().model;
         let ones = vec![1.0; 3 * model.nb()];
-        let body = Dressed::new(&model, &UnitQuaternion::identity(), &asset, &ones, None, Phenotype::default())
-            .unwrap();
+        let body =
+            Dressed::new(&model, &UnitQuaternion::identity(), &asset, &ones, None, Phenotype::default()).unwrap();
         let h = body.bind_pose_height(&model, &ones);
         assert!((h - body.target_stature).abs() < 0.01, "{h} {}", body.target_stature);
         // at the bind state itself (its own scales) skinning reproduces the shape exactly
@@ -216,8 +222,8 @@ mod tests {
     fn a_longer_femur_lengthens_the_thigh() {
         let asset = BodyAsset::shipped().unwrap();
         let model = Context::shipped().unwrap().model;
-        let body = Dressed::new(&model, &UnitQuaternion::identity(), &asset, &[], Some(1.75), Phenotype::default())
-            .unwrap();
+        let body =
+            Dressed::new(&model, &UnitQuaternion::identity(), &asset, &[], Some(1.75), Phenotype::default()).unwrap();
         let mut y = body.binding.y.clone();
         let mut ws = PoseWorkspace::new(&model, &body);
         body.pose(&model, &y, &mut ws);

@@ -121,7 +121,8 @@ fn parent_segment(seg: &str) -> Option<String> {
 
 /// Maps `asset`'s segments onto `model`'s bodies.
 pub fn map_segments(model: &Model, asset: &BodyAsset) -> Result<SegmentMap, BindError> {
-    let missing: Vec<String> = REQUIRED.iter().filter(|s| find_body(model, s).is_none()).map(|s| s.to_string()).collect();
+    let missing: Vec<String> =
+        REQUIRED.iter().filter(|s| find_body(model, s).is_none()).map(|s| s.to_string()).collect();
     if !missing.is_empty() {
         let hints = missing.iter().flat_map(|m| spellings(m).into_iter().take(2)).collect();
         return Err(BindError::Missing(missing, hints));

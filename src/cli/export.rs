@@ -162,8 +162,8 @@ fn write_meshes(
     dir: &std::path::Path,
     frames: &[usize],
 ) -> anyhow::Result<()> {
-    use anyhow::Context as _;
     use crate::body::{BodyAsset, PoseWorkspace};
+    use anyhow::Context as _;
     let take = crate::render::Take::from_record(rec, file)?;
     let asset = BodyAsset::shipped()?;
     let (body, line) =
@@ -176,7 +176,12 @@ fn write_meshes(
     let mut y = vec![0.0; take.model.ny()];
     for f in wanted {
         let i = take.frames.iter().position(|&g| g == f).with_context(|| {
-            format!("frame {f} is not in {} (frames {}..={})", file.display(), take.frames[0], take.frames[take.len() - 1])
+            format!(
+                "frame {f} is not in {} (frames {}..={})",
+                file.display(),
+                take.frames[0],
+                take.frames[take.len() - 1]
+            )
         })?;
         let nq = take.model.nq();
         y[..nq].copy_from_slice(&take.q[i]);

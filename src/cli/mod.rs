@@ -20,8 +20,8 @@ mod markers;
 mod merge;
 mod preview;
 mod project;
-mod solve;
 mod skin_report;
+mod solve;
 mod synth;
 
 use clap::{Parser, Subcommand};

@@ -368,7 +368,8 @@ fn export(
             anyhow::ensure!(written.insert(path.clone()), "--gltf-dir: two trials would both write {}", path.display());
             let take = crate::render::Take::from_solve(ctx, r, trial)?;
             let cams = crate::render::cameras(&take, a.gltf_cameras.as_deref(), a.gltf_rig_seed)?;
-            let sub = crate::body::SubjectBody { stature_m: calibration.and_then(|c| c.prior.stature_m), info: ctx.subject };
+            let sub =
+                crate::body::SubjectBody { stature_m: calibration.and_then(|c| c.prior.stature_m), info: ctx.subject };
             let body = match a.gltf_body {
                 super::export::BodyKind::Capsules => None,
                 super::export::BodyKind::Mesh => super::export::dress_or_note(&take, &sub)?,

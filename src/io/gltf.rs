@@ -377,7 +377,11 @@ pub fn to_glb(doc: &Document) -> Result<Vec<u8>, GltfError> {
     }
     for sk in &doc.skins {
         if sk.joints.len() != sk.inverse_bind.len() || sk.joints.iter().any(|&j| j >= doc.nodes.len()) {
-            return Err(GltfError::Invalid { what: "skin", name: sk.name.clone(), problem: "joints and matrices".into() });
+            return Err(GltfError::Invalid {
+                what: "skin",
+                name: sk.name.clone(),
+                problem: "joints and matrices".into(),
+            });
         }
         let m: Vec<f32> = sk.inverse_bind.iter().flatten().copied().collect();
         let ibm = b.floats(&m, Type::Mat4, 16, false, None);

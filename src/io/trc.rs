@@ -450,10 +450,8 @@ impl Parser {
         trial.frame_numbers.shrink_to_fit();
         if let Some(n) = self.header.as_ref().and_then(|h| h.num_frames) {
             if n != trial.n_frames() as f64 {
-                self.warnings.push(format!(
-                    "NumFrames says {n} but {} data rows were read; using the rows",
-                    trial.n_frames()
-                ));
+                self.warnings
+                    .push(format!("NumFrames says {n} but {} data rows were read; using the rows", trial.n_frames()));
             }
         }
         if let Some((named, num_markers)) = self.widen {
@@ -490,7 +488,9 @@ impl Parser {
             self.warnings.push(format!(
                 "{}: every data row is short: at most {} coordinate cells for the {nm} markers line 4 names; \
                  markers {first}–{nm} ({}…) read as gaps throughout (check NumMarkers and line 4)",
-                self.file, self.widest, trial.labels[first - 1]
+                self.file,
+                self.widest,
+                trial.labels[first - 1]
             ));
         }
         trial.warnings = self.warnings;

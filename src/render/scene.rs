@@ -22,8 +22,8 @@
 use super::rig::Camera;
 use super::take::{side_of, Side, Take};
 use super::RenderError;
-use crate::io::gltf::{self, Document, Material, Mesh, Node, Primitive, Track, Values};
 use crate::body::{Dressed, PoseWorkspace};
+use crate::io::gltf::{self, Document, Material, Mesh, Node, Primitive, Track, Values};
 use crate::kinematics::Workspace;
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 
@@ -99,7 +99,12 @@ pub fn document(take: &Take, cameras: &[Camera], up: Up) -> Result<Document, Ren
 /// scales, JOINTS_0 as u16, WEIGHTS_0 as f32). glTF blends one rest position per vertex, where
 /// [`Dressed::pose`] scales each influence's own local point: the two agree at the bind pose and
 /// differ only where a vertex's bodies are scaled differently.
-pub fn document_with_body(take: &Take, cameras: &[Camera], up: Up, body: Option<&Dressed>) -> Result<Document, RenderError> {
+pub fn document_with_body(
+    take: &Take,
+    cameras: &[Camera],
+    up: Up,
+    body: Option<&Dressed>,
+) -> Result<Document, RenderError> {
     let model = &take.model;
     let dressed = body;
     let mut doc = Document {
