@@ -129,6 +129,33 @@ impl<'e> Lane<'e> {
         }
     }
 
+    /// Solves frame `f` again, alone, from `(prev, prev2)` (a warm start, or with `presolve` the
+    /// frame's pre-solve), after `prepare` on the solver (bounds, say): the statistics and the
+    /// time spent (s). The pose is left in `self.p`.
+    fn solve_again(
+        &mut self,
+        inp: &TrialInputs<'_>,
+        f: usize,
+        (prev, prev2): (Vec<f64>, Option<Vec<f64>>),
+        presolve: bool,
+        prepare: impl FnOnce(&mut FrameSolver<'e>),
+    ) -> (FrameStats, f64) {
+        self.prev = Some(prev);
+        self.prev2 = prev2;
+        self.frame = f;
+        self.start_frame(inp, presolve);
+        prepare(&mut self.solver);
+        let frame = FrameProblem {
+            observed: &self.obs,
+            marker_weights: inp.marker_weights,
+            tracking_ref: &self.reference,
+            tracking_weights: inp.tracking_weights_all,
+        };
+        let stats = self.solver.solve(&frame, &mut self.p);
+        self.it = None;
+        (stats, self.started.elapsed().as_secs_f64())
+    }
+
     /// Prepares `self.frame`: warm start, pose prior, cold start at a segment's beginning, and
     /// with `presolve` the pre-solve of a warm-started frame (a cold start already places the root
     /// and sweeps, [`multi_start_with`]). The pose prior stays at the warm start.
@@ -332,19 +359,7 @@ pub fn resolve_outliers_above(
             let mut warm = (a..f).rev().filter_map(|g| solved(&results[g]).map(|r| r.0.clone()));
             let Some(prev) = warm.next() else { continue };
             let lane = lane.get_or_insert_with(|| Lane::new(eval, settings));
-            lane.prev2 = warm.next();
-            lane.prev = Some(prev);
-            lane.frame = f;
-            lane.start_frame(inp, true);
-            let frame = FrameProblem {
-                observed: &lane.obs,
-                marker_weights: inp.marker_weights,
-                tracking_ref: &lane.reference,
-                tracking_weights: inp.tracking_weights_all,
-            };
-            let stats = lane.solver.solve(&frame, &mut lane.p);
-            lane.it = None;
-            let spent = lane.started.elapsed().as_secs_f64();
+            let (stats, spent) = lane.solve_again(inp, f, (prev, warm.next()), true, |_| {});
             let r = results[f].as_mut().expect("a solved frame");
             if stats.status != FrameStatus::TooFewMarkers && stats.energy < old_energy {
                 *r = (lane.p.clone(), stats, r.2 + spent);
@@ -381,19 +396,7 @@ pub fn resolve_flips(
         }
         let old_rmse = old.rmse_m;
         let lane = lane.get_or_insert_with(|| Lane::new(eval, settings));
-        lane.prev = Some(neighbour.clone());
-        lane.prev2 = None;
-        lane.frame = f;
-        lane.start_frame(inp, false);
-        let frame = FrameProblem {
-            observed: &lane.obs,
-            marker_weights: inp.marker_weights,
-            tracking_ref: &lane.reference,
-            tracking_weights: inp.tracking_weights_all,
-        };
-        let stats = lane.solver.solve(&frame, &mut lane.p);
-        lane.it = None;
-        let spent = lane.started.elapsed().as_secs_f64();
+        let (stats, spent) = lane.solve_again(inp, f, (neighbour.clone(), None), false, |_| {});
         let r = results[f].as_mut().expect("a solved frame");
         let continuous = max_jump(eval.proxy, &neighbour, &lane.p).0 <= FLIP_RAD;
         let fits = stats.rmse_m <= (1.1 * old_rmse).max(old_rmse + 5e-4);
@@ -457,21 +460,9 @@ pub fn resolve_unfittable_jumps(
             }
             let old_rmse = old.rmse_m;
             let lane = lane.get_or_insert_with(|| Lane::new(eval, settings));
-            lane.prev = Some(centre.clone());
-            lane.prev2 = None;
-            lane.frame = g;
-            lane.start_frame(inp, false);
-            lane.solver.bound_rotations(&centre, &limits.bound_rad);
-            let frame = FrameProblem {
-                observed: &lane.obs,
-                marker_weights: inp.marker_weights,
-                tracking_ref: &lane.reference,
-                tracking_weights: inp.tracking_weights_all,
-            };
-            let stats = lane.solver.solve(&frame, &mut lane.p);
+            let bound = |s: &mut FrameSolver<'_>| s.bound_rotations(&centre, &limits.bound_rad);
+            let (stats, spent) = lane.solve_again(inp, g, (centre.clone(), None), false, bound);
             lane.solver.reset_ranges();
-            lane.it = None;
-            let spent = lane.started.elapsed().as_secs_f64();
             let r = results[g].as_mut().expect("a solved frame");
             if stats.status != FrameStatus::TooFewMarkers && stats.rmse_m <= CONTINUED_FIT_RATIO * old_rmse {
                 *r = (lane.p.clone(), stats, r.2 + spent);
