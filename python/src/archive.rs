@@ -213,9 +213,9 @@ impl Trial {
                 let asset = smocap::body::BodyAsset::shipped().map_err(|e| e.to_string())?;
                 let sub =
                     smocap::body::SubjectBody { stature_m: self.rec.subject_stature_m, info: self.rec.subject_info };
-                let (body, _) =
-                    smocap::body::dress_subject(&take.model, &take.world_from_model, &asset, &take.scales, &sub)
-                        .map_err(|e| format!("binding the body mesh to the trial's model: {e}"))?;
+                let (body, _) = take
+                    .dress(&asset, &sub, &smocap::body::FitSettings::default())
+                    .map_err(|e| format!("binding the body mesh to the trial's model: {e}"))?;
                 let mut ws = smocap::body::PoseWorkspace::new(&take.model, &body);
                 let nq = take.model.nq();
                 let mut y = vec![0.0; take.model.ny()];

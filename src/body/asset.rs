@@ -433,6 +433,13 @@ impl BodyAsset {
         Ok(BodyShape { joints: pts[nb..].to_vec(), vertices: pts[..nb].to_vec() })
     }
 
+    /// Basis component `k`: per point (body vertices, then joint cubes) its displacement (m)
+    /// per unit coefficient, flattened `x, y, z`.
+    pub fn component(&self, k: usize) -> &[f32] {
+        let n = self.mean.len();
+        &self.components[k * n..(k + 1) * n]
+    }
+
     /// The shape of a phenotype.
     pub fn shape_from(&self, p: &Phenotype) -> BodyShape {
         self.shape(&self.coeffs(p)).expect("coefficients of the basis' own rank")

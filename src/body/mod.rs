@@ -20,6 +20,7 @@
 
 pub mod asset;
 pub mod bind;
+pub mod fit;
 pub mod keypoints;
 pub mod metrics;
 pub mod obj;
@@ -30,7 +31,8 @@ pub mod subject;
 
 pub use asset::{BodyAsset, BodyError, BodyShape, Phenotype, Skin};
 pub use bind::{bind, Binding, Influence};
+pub use fit::{FitSettings, ShapeFit};
 pub use keypoints::SurfaceKeypoints;
 pub use pose::{phenotype_for, Dressed, PoseWorkspace};
 pub use segments::{BindError, SegmentMap};
-pub use subject::{dress_subject, SubjectBody};
+pub use subject::{dress_subject, dress_subject_with, fit_poses, SubjectBody};
