@@ -350,6 +350,22 @@ fn shaped_bodies_are_the_subjects_stature_with_the_markers_on_the_skin() {
             r["landmarks"]["p90_off_skin_mm"].as_f64().unwrap(),
         );
         assert!(med <= 8.0 && p90 <= 20.0, "{name}: landmarks off the skin median {med} mm, p90 {p90} mm");
+        // the thesis' metrics (its figures: 13.8 mm, 2.32 px at 1080 × 720, a running trial)
+        let out = dir.join(format!("{name}.project"));
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_smocap"))
+            .args(["project", mcap.to_str().unwrap(), "--out", out.to_str().unwrap(), "--stride", "5"])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        eprintln!("{}", String::from_utf8_lossy(&o.stdout));
+        let metrics: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join("metrics.json")).unwrap()).unwrap();
+        let mm = metrics["virtual_marker_error_mm"].as_f64().unwrap();
+        assert!(mm <= 10.0, "{name}: virtual markers {mm} mm from the model's");
+        for c in metrics["cameras"].as_array().unwrap() {
+            let px = c["virtual_marker_error_px"].as_f64().unwrap();
+            assert!(px <= 1.5, "{name}: virtual markers {px} px from the model's ({})", c["camera"]);
+        }
     }
     let _ = std::fs::remove_dir_all(&dir);
 }

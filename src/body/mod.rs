@@ -28,6 +28,7 @@ pub mod pose;
 pub mod segments;
 pub mod skin_distance;
 pub mod subject;
+pub mod virtual_markers;
 
 pub use asset::{BodyAsset, BodyError, BodyShape, Phenotype, Skin};
 pub use bind::{bind, Binding, Influence};
