@@ -21,7 +21,7 @@
 //!   on the highest (the soles are where the feet's markers put them);
 //! - the joint centres (the bodies' origins the binding placed): only where one is less than
 //!   `joint_depth_m` inside the skin, `(d + depth)/σ_j`;
-//! - priors: `β_k` at `σ_β` of skin displacement (RMS over the vertices), `a_s` at `σ_a` of
+//! - priors: `β_k` at `σ_β` of its spread over adults, `a_s` at `σ_a` of
 //!   the displacement of the segment's extremity, `t_s` at `σ_t`; both bounded.
 //!
 //! Gauss–Newton with the nearest skin point held per iteration (the map `θ → Δv` is linear, so
@@ -53,8 +53,9 @@ pub struct FitSettings {
     pub joint_sd_m: f64,
     /// σ of the enclosed volume, as a fraction of the target.
     pub volume_sd: f64,
-    /// σ of one shape coefficient, as RMS skin displacement (m).
-    pub shape_sd_m: f64,
+    /// σ of a shape coefficient's change, in units of its spread over adults (it is kept within
+    /// twice that spread).
+    pub shape_sd: f64,
     /// σ of a segment's stretch, as the displacement (m) of its extremity.
     pub stretch_sd_m: f64,
     /// σ of a segment's shift (m).
@@ -76,10 +77,10 @@ impl Default for FitSettings {
             volume_sd: 0.01,
             joint_depth_m: 0.01,
             joint_sd_m: 0.002,
-            shape_sd_m: 0.01,
+            shape_sd: 0.5,
             stretch_sd_m: 0.015,
-            shift_sd_m: 0.015,
-            shift_max_m: 0.04,
+            shift_sd_m: 0.01,
+            shift_max_m: 0.03,
             huber_m: 0.02,
             iterations: 10,
         }
@@ -117,6 +118,8 @@ struct Problem<'a> {
     centre: Vec<Vector3<f64>>,
     extent: Vec<Vector3<f64>>,
     basis: Vec<&'a [f32]>,
+    /// Each shape coefficient's spread over adults.
+    spread: Vec<f64>,
     skin: &'a [super::asset::Skin],
 }
 
@@ -129,6 +132,9 @@ impl Problem<'_> {
     /// [`FitSettings::shift_max_m`] (and within ±0.3), and its shift within that too (a projected
     /// Gauss–Newton step).
     fn clamp(&self, theta: &mut [f64], settings: &FitSettings) {
+        for (t, s) in theta.iter_mut().zip(&self.spread) {
+            *t = t.clamp(-2.0 * s, 2.0 * s);
+        }
         for s in 0..self.axes.len() {
             let at = self.rank + 6 * s;
             for j in 0..3 {
@@ -256,7 +262,16 @@ fn problem<'a>(model: &Model, body: &Dressed, asset: &'a BodyAsset) -> Problem<'
         extent[s] = extent[s].zip_map(&local, |e: f64, l: f64| e.max(l.abs()));
     }
     let basis = (0..asset.rank()).map(|k| asset.component(k)).collect();
-    Problem { rank: asset.rank(), rest, axes, centre, extent, basis, skin: &asset.skin }
+    Problem {
+        rank: asset.rank(),
+        rest,
+        axes,
+        centre,
+        extent,
+        basis,
+        spread: asset.coefficient_spread(),
+        skin: &asset.skin,
+    }
 }
 
 /// What is fitted, gathered once: the problem, the states, which markers and joints count.
@@ -465,13 +480,12 @@ pub fn fit_to_markers(
     out
 }
 
-/// The priors' σ per parameter: a shape coefficient's σ is `shape_sd_m` over its component's
-/// RMS displacement.
+/// The priors' σ per parameter: a shape coefficient's σ is `shape_sd` of its spread over adults
+/// ([`BodyAsset::coefficient_spread`]).
 fn prior_sd(p: &Problem, settings: &FitSettings) -> Vec<f64> {
     let mut sd = vec![0.0; p.params()];
-    for (k, b) in p.basis.iter().enumerate() {
-        let rms = (b[..3 * p.rest.len()].iter().map(|&x| (x as f64).powi(2)).sum::<f64>() / p.rest.len() as f64).sqrt();
-        sd[k] = settings.shape_sd_m / rms.max(1e-9);
+    for (k, spread) in p.spread.iter().enumerate() {
+        sd[k] = settings.shape_sd * spread.max(1e-9);
     }
     for s in 0..p.axes.len() {
         let at = p.rank + 6 * s;
