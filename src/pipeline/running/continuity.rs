@@ -151,6 +151,20 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_frame_of_an_unfittable_run_reaches_one_bounded_step_from_the_frame_before() {
+        let limits = JumpLimits { bound_rad: vec![0.1, f64::INFINITY], unfittable_m: 0.01, median_m: 0.003 };
+        let (mut mid, mut half) = (vec![0.0; 2], vec![0.0; 2]);
+        // Course at 0; the frame before at 0.15: [−0.1, 0.1] ∩ [0.05, 0.25] = [0.05, 0.1].
+        limits.reach(&[0.0, 3.0], Some((&[0.15, 9.0], 1)), &mut mid, &mut half);
+        assert!((mid[0] - 0.075).abs() < 1e-12 && (half[0] - 0.025).abs() < 1e-12, "{mid:?} {half:?}");
+        assert_eq!((mid[1], half[1]), (3.0, f64::INFINITY));
+        assert!(JumpLimits::outside(&mid, &half, &[0.0, 50.0]) && !JumpLimits::outside(&mid, &half, &[0.08, 50.0]));
+        // Two frames earlier: two steps. Further than the course allows: between the two.
+        limits.reach(&[0.0, 3.0], Some((&[0.5, 9.0], 2)), &mut mid, &mut half);
+        assert!((mid[0] - 0.2).abs() < 1e-12 && (half[0] - 0.1).abs() < 1e-12, "{mid:?} {half:?}");
+    }
+
+    #[test]
     fn unwrapping_moves_by_whole_turns_toward_the_previous_frame() {
         let mut p = vec![-3.1, 0.5];
         unwrap_towards(&mut p, &[3.1 + 2.0 * TAU, 0.0], &[0]);
