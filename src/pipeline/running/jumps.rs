@@ -68,16 +68,8 @@ fn continue_run(
     let (mut free_sq, mut cont_sq, mut spent) = (0.0, 0.0, vec![0.0; b - a]);
     for g in a..b {
         let Some((p, old, _)) = solved(&results[g]) else { continue };
-        let pose = |h: usize| &results[h].as_ref().expect("a solved frame").0;
-        match (before, after) {
-            (Some(x), Some(y)) => {
-                let t = (g - x) as f64 / (y - x) as f64;
-                for (k, c) in course.iter_mut().enumerate() {
-                    *c = pose(x)[k] + t * (pose(y)[k] - pose(x)[k]);
-                }
-            }
-            (Some(x), None) | (None, Some(x)) => course.copy_from_slice(pose(x)),
-            (None, None) => return Vec::new(),
+        if !course_at(results, (before, after), g, &mut course) {
+            return Vec::new();
         }
         limits.reach(&course, last.as_ref().map(|(q, h)| (&q[..], g - h)), &mut mid, &mut half);
         free_sq += old.rmse_m * old.rmse_m;
@@ -119,6 +111,28 @@ fn continue_run(
         }
     }
     charge(results, a, &spent, kept)
+}
+
+/// The course of the motion at frame `g` into `course`: the linear interpolation between the
+/// solved frames `before` and `after` the run, or the one there is; false when there is none.
+fn course_at(
+    results: &[Option<FrameResult>],
+    (before, after): (Option<usize>, Option<usize>),
+    g: usize,
+    course: &mut [f64],
+) -> bool {
+    let pose = |h: usize| &results[h].as_ref().expect("a solved frame").0;
+    match (before, after) {
+        (Some(x), Some(y)) => {
+            let t = (g - x) as f64 / (y - x) as f64;
+            for (k, c) in course.iter_mut().enumerate() {
+                *c = pose(x)[k] + t * (pose(y)[k] - pose(x)[k]);
+            }
+        }
+        (Some(x), None) | (None, Some(x)) => course.copy_from_slice(pose(x)),
+        (None, None) => return false,
+    }
+    true
 }
 
 /// Adds the time spent solving frames `a + i` again (`spent[i]`, s) to theirs; returns `kept`.
