@@ -106,8 +106,8 @@ pub struct ShapeFit {
 }
 
 /// How far (m) the fit can move a skin point at most, with margin: the shift and the stretch's
-/// [`FitSettings::shift_max_m`] each, twice the shape coefficients' reach, and a triangle's size.
-const REACH: f64 = 0.12;
+/// [`FitSettings::shift_max_m`] (3 cm) each, the shape coefficients' reach and a triangle's size.
+const REACH: f64 = 0.08;
 
 /// One residual's dependence on posed vertices: `(vertex, d r / d x_vertex)`.
 type Row = Vec<(usize, Vector3<f64>)>;
@@ -372,12 +372,18 @@ impl Fit<'_> {
                     self.markers.iter().map(|m| st.markers[m.0]).chain(self.joints.iter().map(|&b| st.joints[b]));
                 points
                     .zip(&bodies)
-                    .map(|(x, &b)| {
+                    .enumerate()
+                    .map(|(slot, (x, &b))| {
                         let all = &index.per_body[b];
                         if !x.iter().all(|c| c.is_finite()) {
                             return Vec::new();
                         }
-                        let reach = nearest_on_skin(&posed, self.triangles, all, x).distance.abs() + REACH;
+                        let d0 = nearest_on_skin(&posed, self.triangles, all, x).distance;
+                        // a wand or cluster marker the skin cannot reach never counts
+                        if slot < self.markers.len() && !self.markers[slot].2 && d0 > REACH {
+                            return Vec::new();
+                        }
+                        let reach = d0.abs() + REACH;
                         let within = |t: &u32| {
                             self.triangles[*t as usize].iter().any(|&v| (st.posed[v as usize] - x).norm() < reach)
                         };

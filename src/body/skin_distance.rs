@@ -122,6 +122,11 @@ pub fn nearest_on_skin(vertices: &[[f32; 3]], triangles: &[[u32; 3]], tris: &[u3
     for &t in tris {
         let tri = triangles[t as usize];
         let [a, b, c] = tri.map(|i| v3(vertices[i as usize]));
+        // no point of the triangle is nearer than its nearest vertex less its longest edge
+        let (da, ab, ac) = ((p - a).norm(), (b - a).norm(), (c - a).norm());
+        if da - ab.max(ac) > best + 1e-9 {
+            continue;
+        }
         let q = closest_on_triangle(p, a, b, c);
         let d = (p - q).norm();
         if d > best + 1e-9 {
