@@ -30,6 +30,7 @@
 //! centres, midpoints of two markers) are not skin markers and take no part.
 
 use super::asset::BodyAsset;
+pub use super::pose::ShapeFit;
 use super::pose::{Dressed, PoseWorkspace};
 use super::skin_distance::{nearest_on_skin, MarkerKind, SkinIndex};
 use crate::model::Model;
@@ -85,24 +86,6 @@ impl Default for FitSettings {
             iterations: 10,
         }
     }
-}
-
-/// What the fit did, per segment and overall.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct ShapeFit {
-    pub coefficients: Vec<f64>,
-    /// Per asset segment: name, stretch along its body's x, y, z, shift (m, asset frame).
-    pub segments: Vec<(String, [f64; 3], [f64; 3])>,
-    /// Landmarks' median |d − ρ| (m) at the bind pose, before and after.
-    pub landmark_median_before_m: f64,
-    pub landmark_median_after_m: f64,
-    /// Body height minus stature (m) before and after (`None`: stature unknown).
-    pub stature_error_before_m: Option<f64>,
-    pub stature_error_after_m: Option<f64>,
-    /// Enclosed volume over the target, minus 1, before and after (`None`: mass unknown).
-    pub volume_error_before: Option<f64>,
-    pub volume_error_after: Option<f64>,
-    pub markers_used: usize,
 }
 
 /// How far (m) the fit can move a skin point at most, with margin: the shift and the stretch's

@@ -32,6 +32,7 @@ pub mod metrics;
 pub mod obj;
 pub mod pose;
 pub mod segments;
+pub mod shape_space;
 pub mod skin_distance;
 pub mod subject;
 pub mod virtual_markers;

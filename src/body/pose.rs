@@ -20,6 +20,7 @@ use crate::kinematics::cpu::{forward, Workspace};
 use crate::model::anthropometry::Sex;
 use crate::model::Model;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
 
 /// The body of one subject on its model.
 #[derive(Clone, Debug)]
@@ -33,7 +34,25 @@ pub struct Dressed {
     /// Counter-clockwise seen from outside.
     pub triangles: Vec<[u32; 3]>,
     /// The shaping to the subject's markers, where it was done ([`super::fit`]).
-    pub fit: Option<super::fit::ShapeFit>,
+    pub fit: Option<ShapeFit>,
+}
+
+/// What the fit to the markers did ([`super::fit`]), per segment and overall.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ShapeFit {
+    pub coefficients: Vec<f64>,
+    /// Per asset segment: name, stretch along its body's x, y, z, shift (m, asset frame).
+    pub segments: Vec<(String, [f64; 3], [f64; 3])>,
+    /// Landmarks' median |d − ρ| (m) at the bind pose, before and after.
+    pub landmark_median_before_m: f64,
+    pub landmark_median_after_m: f64,
+    /// Body height minus stature (m) before and after (`None`: stature unknown).
+    pub stature_error_before_m: Option<f64>,
+    pub stature_error_after_m: Option<f64>,
+    /// Enclosed volume over the target, minus 1, before and after (`None`: mass unknown).
+    pub volume_error_before: Option<f64>,
+    pub volume_error_after: Option<f64>,
+    pub markers_used: usize,
 }
 
 /// Scratch for posing: forward kinematics and the posed vertices (Z-up world, m).

@@ -14,7 +14,7 @@ pub fn write(
 ) -> anyhow::Result<()> {
     let take = crate::render::Take::from_record(rec, file)?;
     let asset = crate::body::BodyAsset::shipped()?;
-    let (body, _) = take
+    let (body, line) = take
         .dress(&asset, &sub, &crate::body::FitSettings::default())
         .context("binding the body mesh to the trial's model")?;
     let nq = take.model.nq();
@@ -44,9 +44,17 @@ pub fn write(
         let (med, p90, n) = pooled(&markers, pick);
         serde_json::json!({ "markers": n, "median_off_skin_mm": mm(med), "p90_off_skin_mm": mm(p90) })
     };
+    let height = body.bind_pose_height(&take.model, &take.scales);
     let report = serde_json::json!({
         "trial": take.name,
         "frames": states.len(),
+        "body": {
+            "summary": line,
+            "height_m": height,
+            "stature_m": body.target_stature,
+            "height_minus_stature_mm": mm(height - body.target_stature),
+            "shape_fit": body.fit,
+        },
         "marker_radius_mm": MARKER_RADIUS * 1e3,
         "distance": "signed, marker centre to the nearest point of the posed skin (positive outside); off_skin = |distance - radius|",
         "landmarks": group(&|m| m.landmark && !m.computed),
