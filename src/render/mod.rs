@@ -6,11 +6,18 @@
 //! Input is a [`take::Take`]: a converted MCAP file read back, or a trial `solve` just solved;
 //! everything is placed in the Z-up `world` of the MCAP `/tf` tree (metres, seconds).
 
+pub mod coco;
+pub mod look;
+pub mod png_out;
 pub mod preview;
 pub mod project;
+pub mod raster;
 pub mod rig;
 pub mod scene;
 pub mod take;
+pub mod video;
+pub mod video_out;
+pub mod visibility;
 
 pub use rig::{Camera, SubjectFrame};
 pub use take::{Pose, Take};
@@ -30,6 +37,8 @@ pub enum RenderError {
     Gltf(#[from] crate::io::gltf::GltfError),
     #[error("{file}: {what}")]
     Image { file: String, what: String },
+    #[error(transparent)]
+    Raster(#[from] raster::RasterError),
 }
 
 /// The subject frame of a take (for default rigs and rigs in subject coordinates): from its

@@ -1,0 +1,126 @@
+//! Keypoint visibility from the rendered buffers (COCO `v`): 0 behind the camera or outside the
+//! image; otherwise, at the keypoint's pixel (its coordinates rounded):
+//! - a point on or off the skin (markers, the body's surface keypoints): 1 (occluded, by its own
+//!   body or another subject) where a body lies there more than [`DEPTH_TOLERANCE_M`] in front
+//!   of it along the camera axis; else 2 (the body there is within the tolerance, behind it, or
+//!   absent: a marker beside the silhouette is in plain view);
+//! - a point inside the body (joint centres): 2 where the mask shows its own segment or one
+//!   adjoining it (of the same subject; skinless bodies are looked through to the next ones), or
+//!   nothing; 1 where it shows any other segment or subject.
+
+use super::raster::Images;
+use super::rig::Pixel;
+use crate::model::Model;
+
+/// How far (m) along the camera axis a surface may lie in front of a point that still counts
+/// as visible.
+pub const DEPTH_TOLERANCE_M: f64 = 0.01;
+
+/// What a keypoint is, for its test.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    /// On or off the skin: markers, surface keypoints.
+    Surface,
+    /// Inside the body, at body `b`'s joint centre.
+    Inside(usize),
+}
+
+/// The labels of one subject in the mask: `first + body`, and per body the labels of the
+/// segments adjoining it.
+#[derive(Clone, Debug)]
+pub struct Labels {
+    pub first: u16,
+    pub count: u16,
+    adjoining: Vec<Vec<u16>>,
+}
+
+impl Labels {
+    /// The labels of `model`'s bodies from `first`; `skinned[b]`: whether body `b` carries skin.
+    pub fn new(model: &Model, first: u16, skinned: &[bool]) -> Labels {
+        let nb = model.nb();
+        let mut near: Vec<Vec<usize>> = vec![Vec::new(); nb];
+        for (b, body) in model.bodies.iter().enumerate() {
+            if let Some(p) = body.parent {
+                near[b].push(p);
+                near[p].push(b);
+            }
+        }
+        let adjoining = (0..nb)
+            .map(|b| {
+                let mut out = vec![b];
+                let mut stack: Vec<usize> = near[b].clone();
+                let mut seen = vec![false; nb];
+                seen[b] = true;
+                while let Some(x) = stack.pop() {
+                    if std::mem::replace(&mut seen[x], true) {
+                        continue;
+                    }
+                    out.push(x);
+                    if !skinned[x] {
+                        stack.extend(near[x].iter().filter(|&&y| !seen[y]));
+                    }
+                }
+                out.sort_unstable();
+                out.into_iter().map(|x| first + x as u16).collect()
+            })
+            .collect();
+        Labels { first, count: nb as u16, adjoining }
+    }
+
+    /// Whether `label` is one of this subject's.
+    pub fn owns(&self, label: u16) -> bool {
+        label >= self.first && label < self.first + self.count
+    }
+}
+
+/// The pixel a projected point falls in (its coordinates rounded), if inside the image.
+pub fn pixel_of(px: &Pixel, img: &Images) -> Option<usize> {
+    if !px.in_image {
+        return None;
+    }
+    img.index((px.u + 0.5).floor() as i64, (px.v + 0.5).floor() as i64)
+}
+
+/// The COCO visibility of a point projected to `px` (see the module documentation).
+pub fn visibility(px: &Pixel, kind: Kind, img: &Images, labels: &Labels) -> u8 {
+    let Some(i) = pixel_of(px, img) else { return 0 };
+    let label = img.mask[i];
+    if label == 0 {
+        return 2;
+    }
+    match kind {
+        Kind::Surface => {
+            if px.depth > img.depth_m[i] as f64 + DEPTH_TOLERANCE_M {
+                1
+            } else {
+                2
+            }
+        }
+        Kind::Inside(b) => {
+            if labels.adjoining[b].contains(&label) {
+                2
+            } else {
+                1
+            }
+        }
+    }
+}
+
+/// The box `[x, y, w, h]` (px, pixel edges: pixel centres at integers) and pixel count of the
+/// pixels carrying `labels`' labels; `None` when there are none.
+pub fn mask_box(img: &Images, labels: &Labels) -> Option<([f64; 4], usize)> {
+    let w = img.size.0 as usize;
+    let (mut lo, mut hi, mut n) = ([usize::MAX; 2], [0usize; 2], 0usize);
+    for (i, &l) in img.mask.iter().enumerate() {
+        if l != 0 && labels.owns(l) {
+            let (x, y) = (i % w, i / w);
+            lo = [lo[0].min(x), lo[1].min(y)];
+            hi = [hi[0].max(x), hi[1].max(y)];
+            n += 1;
+        }
+    }
+    (n > 0).then(|| {
+        let b = [lo[0] as f64 - 0.5, lo[1] as f64 - 0.5, (hi[0] - lo[0] + 1) as f64, (hi[1] - lo[1] + 1) as f64];
+        (b, n)
+    })
+}
