@@ -6,7 +6,11 @@
 //!   absent: a marker beside the silhouette is in plain view);
 //! - a point inside the body (joint centres): 2 where the mask shows its own segment or one
 //!   adjoining it (of the same subject; skinless bodies are looked through to the next ones), or
-//!   nothing; 1 where it shows any other segment or subject.
+//!   nothing, or where the point is not more than the tolerance behind the surface there (a joint
+//!   centre the skin does not wrap); 1 where another segment or subject lies more than the
+//!   tolerance in front of it.
+//!
+//! So every occluded point (v = 1) lies more than the tolerance behind the depth buffer.
 
 use super::raster::Images;
 use super::rig::Pixel;
@@ -89,13 +93,8 @@ pub fn visibility(px: &Pixel, kind: Kind, img: &Images, labels: &Labels) -> u8 {
         return 2;
     }
     match kind {
-        Kind::Surface => {
-            if px.depth > img.depth_m[i] as f64 + DEPTH_TOLERANCE_M {
-                1
-            } else {
-                2
-            }
-        }
+        _ if px.depth <= img.depth_m[i] as f64 + DEPTH_TOLERANCE_M => 2,
+        Kind::Surface => 1,
         Kind::Inside(b) => {
             if labels.adjoining[b].contains(&label) {
                 2
