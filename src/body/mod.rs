@@ -20,6 +20,7 @@
 
 pub mod asset;
 pub mod bind;
+pub mod keypoints;
 pub mod metrics;
 pub mod obj;
 pub mod pose;
@@ -29,6 +30,7 @@ pub mod subject;
 
 pub use asset::{BodyAsset, BodyError, BodyShape, Phenotype, Skin};
 pub use bind::{bind, Binding, Influence};
+pub use keypoints::SurfaceKeypoints;
 pub use pose::{phenotype_for, Dressed, PoseWorkspace};
 pub use segments::{BindError, SegmentMap};
 pub use subject::{dress_subject, SubjectBody};
