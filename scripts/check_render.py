@@ -9,10 +9,13 @@ triangle with cv2.fillConvexPoly (1/256 px sub-pixel precision) at 8 x 8 samples
 half its samples are, and compares that silhouette with the rendered mask (label > 0): IoU >= 0.98
 for every camera and frame (the IoU against a plain one-sample fill, which also fills every pixel an
 edge passes through, is printed too). Then the keypoints,
-re-read from the written files: v=0 only outside the image or behind the camera; a marker with
-v=2 has no body more than 1 cm in front of it in the depth PNG (mm; 0.5 mm quantization
-allowed), one with v=1 has; a joint centre with v=1 lies on another segment's pixel and more than
-1 cm behind it. pycocotools loads every COCO file; every box contains its visible keypoints.
+re-read from the written files (depth PNG in mm: 0.5 mm quantization allowed): v=0 only outside
+the image or behind the camera; every v=1 keypoint lies more than 1 cm behind the depth buffer
+(but surface keypoints on a tip too thin to be drawn: counted apart);
+a surface keypoint (nose, eyes, ears, toes, heels) with v=2 lies in the mask within 1 cm of the
+buffer, or on an outline (its pixel's centre sees the background or a farther surface, a
+neighbouring pixel the surface it is on: counted apart); a marker with v=2 is not more
+than 1 cm behind the buffer; a joint centre with v=1 is not on its own segment. pycocotools loads every COCO file; every box contains its visible keypoints.
 
 Needs numpy, OpenCV and pycocotools (`pip install opencv-python-headless numpy pycocotools`).
 SMOCAP_BIN names a built smocap (default: cargo run --release).
@@ -72,6 +75,16 @@ def silhouette(verts, faces, cam, ss):
     return img.reshape(h, ss, w, ss).mean(axis=(1, 3)) >= 0.5
 
 
+def on_outline(mask, depth, px, py, d, tol=TOL_M + QUANT_M):
+    """Whether (px, py) or a pixel next to it shows a body within `tol` of depth d."""
+    win = (slice(max(py - 1, 0), py + 2), slice(max(px - 1, 0), px + 2))
+    return bool(((mask[win] != 0) & (np.abs(depth[win] - d) <= tol)).any())
+
+
+def count(report, key):
+    report[key] = report.get(key, 0) + 1
+
+
 def check_keypoints(root, cam, coco_path, report):
     with contextlib.redirect_stdout(io.StringIO()):
         coco = COCO(coco_path)
@@ -99,19 +112,27 @@ def check_keypoints(root, cam, coco_path, report):
             m, dd = mask[py, px], depth[py, px]
             if v == 2 and not (bx - 1e-6 <= x <= bx + bw + 1e-6 and by - 1e-6 <= y <= by + bh + 1e-6):
                 report["bad"].append(f"{coco_path} ann {ann['id']} kp {j}: visible outside its bbox")
-            key = f"{kind} v={int(v)}"
-            report[key] = report.get(key, 0) + 1
-            if kind == "marker":
-                front = m != 0 and d > dd + TOL_M + QUANT_M
-                behind_ok = m != 0 and d > dd + TOL_M - QUANT_M
-                if (v == 2 and front) or (v == 1 and not behind_ok):
-                    report["bad"].append(f"{coco_path} ann {ann['id']} {kind} {j}: v={v}, depth {d:.4f} m, buffer {dd:.4f} m, label {m}")
-                if v == 2 and m != 0 and abs(d - dd) <= TOL_M + QUANT_M:
-                    report["marker v=2 in mask within 1 cm"] = report.get("marker v=2 in mask within 1 cm", 0) + 1
-            elif v == 1:
-                own = first + (j - cat["keypoint_kinds"].index("joint"))
-                if m == 0 or m == own or not d > dd + TOL_M - QUANT_M:
-                    report["bad"].append(f"{coco_path} ann {ann['id']} joint {j}: v=1 on label {m} (own {own}), depth {d:.4f}, buffer {dd:.4f}")
+            count(report, f"{kind} v={int(v)}")
+            behind = m != 0 and d > dd + TOL_M - QUANT_M
+            if v == 1 and kind == "surface" and not behind:
+                if on_outline(mask, depth, px, py, d, TOL_M - QUANT_M):
+                    report["bad"].append(f"{coco_path} ann {ann['id']} surface {j}: v=1 but the surface is drawn there")
+                else:
+                    count(report, "surface v=1 not drawn (a tip covering no pixel centre)")
+            elif v == 1 and not behind:
+                report["bad"].append(f"{coco_path} ann {ann['id']} {kind} {j}: v=1 but not behind the buffer (depth {d:.4f} m, buffer {dd:.4f} m, label {m})")
+            if kind == "surface" and v == 2:
+                if m != 0 and abs(d - dd) <= TOL_M + QUANT_M:
+                    count(report, "surface v=2 in the mask within 1 cm")
+                elif on_outline(mask, depth, px, py, d):
+                    # its pixel's centre sees the background or a surface behind the one it is on
+                    count(report, "surface v=2 on an outline (a 3x3 neighbour within 1 cm)")
+                else:
+                    report["bad"].append(f"{coco_path} ann {ann['id']} surface {j}: v=2, depth {d:.4f} m, buffer {dd:.4f} m")
+            if kind == "marker" and v == 2 and m != 0 and d > dd + TOL_M + QUANT_M:
+                report["bad"].append(f"{coco_path} ann {ann['id']} marker {j}: v=2 behind the buffer (depth {d:.4f} m, buffer {dd:.4f} m)")
+            if kind == "joint" and v == 1 and m == first + (j - cat["keypoint_kinds"].index("joint")):
+                report["bad"].append(f"{coco_path} ann {ann['id']} joint {j}: v=1 on its own segment")
     return len(coco.getAnnIds())
 
 

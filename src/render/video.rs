@@ -1,12 +1,14 @@
 //! Rendering solved subjects through a camera rig: per frame and camera the images of
-//! [`super::raster`] and each subject's keypoints (model markers, then joint centres) with their
-//! visibility ([`super::visibility`]) and depths. [`Renderer`] draws frames into memory (the
+//! [`super::raster`] and each subject's keypoints with their visibility ([`super::visibility`])
+//! and depths: the body's surface keypoints (COCO-17 + feet, [`crate::body::keypoints`]; its
+//! joints, shoulders to ankles, lie inside the body), the model's joint centres, its markers. [`Renderer`] draws frames into memory (the
 //! Python binding uses it as is); [`super::video_out`] writes them to a folder.
 
 use super::raster::{Gpu, Images, RasterError, Rasterizer, Scene};
 use super::rig::{Camera, Pixel};
 use super::take::Take;
 use super::visibility::{self, Kind, Labels};
+use crate::body::keypoints::SurfaceKeypoints;
 use crate::body::{BodyAsset, Dressed, PoseWorkspace, SubjectBody};
 use crate::kinematics::Workspace;
 use nalgebra::Vector3;
@@ -52,6 +54,32 @@ pub struct Renderer {
     vertices: Vec<[f32; 3]>,
     pose: Vec<(PoseWorkspace, Vec<f64>)>,
     kin: Vec<Workspace>,
+    surface: SurfaceKeypoints,
+    /// Per subject, each surface keypoint's kind (inside: its body, the largest influence's).
+    surface_kinds: Vec<Vec<Kind>>,
+    /// Per subject, the surface keypoints of the frame drawn last (`world`, m), and that frame.
+    surface_at: Vec<Vec<[f64; 3]>>,
+    drawn: Option<usize>,
+}
+
+/// The kinds of `surface`'s keypoints on `body`: a single vertex is on the skin; a combination
+/// (a joint regressor) is inside, at the body carrying most of its weight.
+fn surface_kinds(surface: &SurfaceKeypoints, body: &Dressed, nb: usize) -> Vec<Kind> {
+    let mut weight = vec![0.0f64; nb];
+    surface
+        .combos
+        .iter()
+        .map(|c| {
+            if c.len() == 1 {
+                return Kind::Skin;
+            }
+            weight.iter_mut().for_each(|w| *w = 0.0);
+            for &(v, w) in c {
+                weight[body.binding.influences[v as usize][0].body as usize] += w as f64;
+            }
+            Kind::Inside((0..nb).fold(0, |b, k| if weight[k] > weight[b] { k } else { b }))
+        })
+        .collect()
 }
 
 /// Per subject, whether each model body carries skin (is some vertex's largest influence).
@@ -79,6 +107,8 @@ impl Renderer {
             first += a.take.model.nb() as u16;
         }
         let raster = Rasterizer::new(gpu, &fixed, &triangles);
+        let surface = SurfaceKeypoints::new(&asset);
+        let kinds = actors.iter().map(|a| surface_kinds(&surface, &a.body, a.take.model.nb())).collect();
         let frame = super::subject_frame(&actors[0].take);
         let origin = frame.origin + Vector3::z() * frame.root_height;
         let pose = actors.iter().map(|a| (PoseWorkspace::new(&a.take.model, &a.body), vec![0.0; a.take.model.ny()]));
@@ -86,6 +116,10 @@ impl Renderer {
         Renderer {
             pose: pose.collect(),
             kin,
+            surface_at: vec![Vec::new(); actors.len()],
+            surface_kinds: kinds,
+            surface,
+            drawn: None,
             vertices: Vec::with_capacity(fixed.len()),
             actors,
             cameras,
@@ -118,26 +152,48 @@ impl Renderer {
     /// Draws frame `i` (position in the takes) through every camera into `out`.
     pub fn draw(&mut self, i: usize, out: &mut [Images]) -> Result<(), RasterError> {
         self.vertices.clear();
-        for (a, (ws, y)) in self.actors.iter().zip(&mut self.pose) {
+        for (k, (a, (ws, y))) in self.actors.iter().zip(&mut self.pose).enumerate() {
             let nq = a.take.model.nq();
             y[..nq].copy_from_slice(&a.take.q[i]);
             y[nq..].copy_from_slice(&a.take.scales);
             a.body.pose(&a.take.model, y, ws);
             self.vertices.extend_from_slice(&ws.vertices);
+            self.surface.evaluate(&ws.vertices, &mut self.surface_at[k]);
         }
+        self.drawn = Some(i);
         self.raster.set_pose(&self.vertices, self.origin);
         self.raster.draw(&self.cameras, &self.scene, out)
     }
 
-    /// Subject `k`'s keypoints at frame `i` in camera `c`, whose images of that frame are
-    /// `img`: each point projected, its visibility tested on the images, the box and area from
-    /// the mask.
+    /// The keypoint names of subject `k` (surface keypoints, joint centres named by their body,
+    /// `joint:<body>` where another keypoint has that name, markers) and their kinds (`surface`,
+    /// `inside` for the surface set's joints, `joint`, `marker`).
+    pub fn keypoint_names(&self, k: usize) -> (Vec<String>, Vec<&'static str>) {
+        let m = &self.actors[k].take.model;
+        let mut names: Vec<String> = crate::body::keypoints::NAMES.iter().map(|s| s.to_string()).collect();
+        let mut kinds: Vec<&str> =
+            self.surface_kinds[k].iter().map(|x| if *x == Kind::Skin { "surface" } else { "inside" }).collect();
+        for b in &m.bodies {
+            let clash = m.markers.iter().any(|x| x.name == b.name) || names.contains(&b.name);
+            names.push(if clash { format!("joint:{}", b.name) } else { b.name.clone() });
+            kinds.push("joint");
+        }
+        names.extend(m.markers.iter().map(|x| x.name.clone()));
+        kinds.extend(m.markers.iter().map(|_| "marker"));
+        (names, kinds)
+    }
+
+    /// Subject `k`'s keypoints (in [`Renderer::keypoint_names`]' order) at frame `i`, the frame
+    /// drawn last, in camera `c`, whose images of it are `img`: each point projected, its
+    /// visibility tested on the images, the box and area from the mask.
     pub fn keypoints(&mut self, k: usize, i: usize, c: usize, img: &Images, out: &mut Keypoints) {
+        assert_eq!(self.drawn, Some(i), "keypoints of the frame drawn last");
         let take = &self.actors[k].take;
         let pose = take.pose(i, &mut self.kin[k]);
+        let ns = self.surface_at[k].len();
+        let surface = self.surface_at[k].iter().map(|p| Vector3::new(p[0], p[1], p[2]));
         let cam = &self.cameras[c];
         let labels = &self.labels[k];
-        let nm = pose.markers.len();
         out.xyv.clear();
         out.depths_m.clear();
         out.labelled = 0;
@@ -146,9 +202,14 @@ impl Renderer {
         if area == 0 {
             (lo, hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
         }
-        for (j, p) in pose.markers.iter().chain(&pose.joints).enumerate() {
-            let px: Pixel = cam.project(p);
-            let kind = if j < nm { Kind::Surface } else { Kind::Inside(j - nm) };
+        let nb = pose.joints.len();
+        for (j, p) in surface.chain(pose.joints.iter().copied()).chain(pose.markers.iter().copied()).enumerate() {
+            let px: Pixel = cam.project(&p);
+            let kind = match j {
+                j if j < ns => self.surface_kinds[k][j],
+                j if j < ns + nb => Kind::Inside(j - ns),
+                _ => Kind::Marker,
+            };
             let v = visibility::visibility(&px, kind, img, labels);
             out.depths_m.push(px.depth);
             if v == 0 {

@@ -64,12 +64,13 @@ fn coco_head(r: &Renderer, c: usize) -> serde_json::Map<String, serde_json::Valu
         .iter()
         .enumerate()
         .map(|(k, a)| {
-            let names = super::project::keypoint_names(&a.take);
-            let nm = a.take.model.markers.len();
-            let kinds: Vec<&str> = (0..names.len()).map(|i| if i < nm { "marker" } else { "joint" }).collect();
-            let skeleton: Vec<[usize; 2]> = (a.take.model.bodies.iter().enumerate())
-                .filter_map(|(b, body)| Some([nm + body.parent? + 1, nm + b + 1]))
-                .collect();
+            let (names, kinds) = r.keypoint_names(k);
+            let ns = crate::body::keypoints::NAMES.len();
+            let mut skeleton: Vec<[usize; 2]> = crate::body::keypoints::SKELETON.to_vec();
+            skeleton.extend(
+                (a.take.model.bodies.iter().enumerate())
+                    .filter_map(|(b, body)| Some([ns + body.parent? + 1, ns + b + 1])),
+            );
             let bodies: Vec<&str> = a.take.model.bodies.iter().map(|b| b.name.as_str()).collect();
             json!({ "id": k + 1, "name": a.take.name, "supercategory": "person", "keypoints": names,
                     "keypoint_kinds": kinds, "skeleton": skeleton,

@@ -1,16 +1,19 @@
 //! Keypoint visibility from the rendered buffers (COCO `v`): 0 behind the camera or outside the
 //! image; otherwise, at the keypoint's pixel (its coordinates rounded):
-//! - a point on or off the skin (markers, the body's surface keypoints): 1 (occluded, by its own
-//!   body or another subject) where a body lies there more than [`DEPTH_TOLERANCE_M`] in front
-//!   of it along the camera axis; else 2 (the body there is within the tolerance, behind it, or
-//!   absent: a marker beside the silhouette is in plain view);
-//! - a point inside the body (joint centres): 2 where the mask shows its own segment or one
-//!   adjoining it (of the same subject; skinless bodies are looked through to the next ones), or
-//!   nothing, or where the point is not more than the tolerance behind the surface there (a joint
-//!   centre the skin does not wrap); 1 where another segment or subject lies more than the
-//!   tolerance in front of it.
-//!
-//! So every occluded point (v = 1) lies more than the tolerance behind the depth buffer.
+//! - a point on the skin (the body's surface keypoints: nose, eyes, ears, toes, heels): 2 where
+//!   that pixel or one of its 8 neighbours shows a body within [`DEPTH_TOLERANCE_M`] of the
+//!   point's depth (the drawn surface confirms it; the neighbours catch points on an outline,
+//!   whose own pixel centre sees past the edge); else 1: occluded (something more than the
+//!   tolerance in front), or on a tip too thin to cover any pixel centre;
+//! - a point off the skin (markers, never drawn themselves): 1 (occluded, by its own body or
+//!   another subject) where a body lies at its pixel more than the tolerance in front of it;
+//!   else 2 (the body there is within the tolerance, behind it, or absent: a marker beside the
+//!   silhouette is in plain view);
+//! - a point inside the body (joint centres, the surface set's joints): 2 where the mask shows
+//!   its own segment or one adjoining it (of the same subject; skinless bodies are looked
+//!   through to the next ones), or nothing, or where the point is not more than the tolerance
+//!   behind the surface there (a joint centre the skin does not wrap); 1 where another segment
+//!   or subject lies more than the tolerance in front of it.
 
 use super::raster::Images;
 use super::rig::Pixel;
@@ -23,8 +26,10 @@ pub const DEPTH_TOLERANCE_M: f64 = 0.01;
 /// What a keypoint is, for its test.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kind {
-    /// On or off the skin: markers, surface keypoints.
-    Surface,
+    /// On the skin: the body's surface keypoints.
+    Skin,
+    /// Off the skin: markers.
+    Marker,
     /// Inside the body, at body `b`'s joint centre.
     Inside(usize),
 }
@@ -89,12 +94,15 @@ pub fn pixel_of(px: &Pixel, img: &Images) -> Option<usize> {
 pub fn visibility(px: &Pixel, kind: Kind, img: &Images, labels: &Labels) -> u8 {
     let Some(i) = pixel_of(px, img) else { return 0 };
     let label = img.mask[i];
+    if kind == Kind::Skin {
+        return if confirmed(img, i, px.depth) { 2 } else { 1 };
+    }
     if label == 0 {
         return 2;
     }
     match kind {
         _ if px.depth <= img.depth_m[i] as f64 + DEPTH_TOLERANCE_M => 2,
-        Kind::Surface => 1,
+        Kind::Skin | Kind::Marker => 1,
         Kind::Inside(b) => {
             if labels.adjoining[b].contains(&label) {
                 2
@@ -103,6 +111,18 @@ pub fn visibility(px: &Pixel, kind: Kind, img: &Images, labels: &Labels) -> u8 {
             }
         }
     }
+}
+
+/// Whether pixel `i` or one of its neighbours shows a body within the tolerance of `depth` (m).
+fn confirmed(img: &Images, i: usize, depth: f64) -> bool {
+    let w = img.size.0 as i64;
+    let (x, y) = (i as i64 % w, i as i64 / w);
+    (-1..=1).any(|dy| {
+        (-1..=1).any(|dx| {
+            img.index(x + dx, y + dy)
+                .is_some_and(|j| img.mask[j] != 0 && (img.depth_m[j] as f64 - depth).abs() <= DEPTH_TOLERANCE_M)
+        })
+    })
 }
 
 /// The box `[x, y, w, h]` (px, pixel edges: pixel centres at integers) and pixel count of the
