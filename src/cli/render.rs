@@ -77,31 +77,9 @@ fn trials(inputs: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
     Ok(out)
 }
 
-/// `seed` mixed with a trial's name (FNV-1a): each trial of an archive gets its own looks.
-fn trial_seed(seed: u64, name: &str) -> u64 {
-    name.bytes().fold(0xcbf2_9ce4_8422_2325u64 ^ seed, |h, b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3))
-}
-
-/// Reads a trial and dresses its subject.
-fn actor(file: &Path) -> anyhow::Result<video::Actor> {
-    let rec = crate::archive::export::read_trial_record(file)?;
-    let take = render::Take::from_record(&rec, file)?;
-    let asset = crate::body::BodyAsset::shipped()?;
-    let sub = super::export::subject_body(&rec);
-    let (a, line) = video::Actor::dress(take, &asset, &sub)
-        .with_context(|| format!("{}: binding the body mesh to the trial's model", file.display()))?;
-    eprintln!("{}: {line}", a.take.name);
-    Ok(a)
-}
-
 /// Renders `files` as one scene into `dir`; the summary is also written as `dir/render.json`.
 fn render_scene(a: &RenderArgs, files: &[PathBuf], dir: &Path, name: &str) -> anyhow::Result<video_out::Rendered> {
-    let actors = files.iter().map(|f| actor(f)).collect::<anyhow::Result<Vec<_>>>()?;
-    let seed = trial_seed(a.seed, name);
-    let cams = render::cameras(&actors[0].take, a.cameras.as_deref(), a.seed)?;
-    let cams = video::resized(cams, a.size);
-    let gpu = raster::Gpu::new()?;
-    let mut r = video::Renderer::new(gpu, actors, cams, render::look::scene(seed), seed);
+    let mut r = video::scene_renderer(files, a.cameras.as_deref(), a.size, a.seed, name)?;
     let frames: Vec<usize> = (0..r.len()).step_by(a.every).collect();
     let done = video_out::render_to_dir(&mut r, &frames, dir, !a.quiet)?;
     let summary = serde_json::json!({
@@ -169,10 +147,9 @@ pub fn run(a: RenderArgs) -> anyhow::Result<u8> {
     }
     if !single {
         write_index(&a.out)?;
-        eprintln!(
-            "{ok} trials rendered or done before, {failed} failed; {:.1} frames/s",
-            frames as f64 / seconds.max(1e-9)
-        );
+        let rate =
+            if frames > 0 { format!("; {:.1} frames/s", frames as f64 / seconds.max(1e-9)) } else { String::new() };
+        eprintln!("{ok} trials rendered or done before, {failed} failed{rate}");
     }
     Ok(super::exit_code(ok, failed, false))
 }

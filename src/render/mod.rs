@@ -39,6 +39,10 @@ pub enum RenderError {
     Image { file: String, what: String },
     #[error(transparent)]
     Raster(#[from] raster::RasterError),
+    #[error("binding the body mesh to the trial's model: {0}")]
+    Bind(#[from] crate::body::BindError),
+    #[error(transparent)]
+    Body(#[from] crate::body::BodyError),
 }
 
 /// The subject frame of a take (for default rigs and rigs in subject coordinates): from its

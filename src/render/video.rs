@@ -228,6 +228,39 @@ impl Renderer {
     }
 }
 
+/// `seed` mixed with a scene's name (FNV-1a): each trial of an archive gets its own looks.
+pub fn scene_seed(seed: u64, name: &str) -> u64 {
+    name.bytes().fold(0xcbf2_9ce4_8422_2325u64 ^ seed, |h, b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3))
+}
+
+/// The renderer `smocap render` makes of converted trials `files` (one scene; the first one's
+/// subject frame places the default rig): each subject dressed (its summary line on stderr), the
+/// rig `rig` or the default one perturbed by `seed`, at `size`, the looks of `seed` mixed with
+/// `name`.
+pub fn scene_renderer(
+    files: &[std::path::PathBuf],
+    rig: Option<&std::path::Path>,
+    size: Option<(u32, u32)>,
+    seed: u64,
+    name: &str,
+) -> Result<Renderer, super::RenderError> {
+    let asset = BodyAsset::shipped()?;
+    let mut actors = Vec::with_capacity(files.len());
+    for f in files {
+        let rec = crate::archive::export::read_trial_record(f)?;
+        let take = Take::from_record(&rec, f)?;
+        let sub = SubjectBody { stature_m: rec.subject_stature_m, info: rec.subject_info };
+        let (a, line) = Actor::dress(take, &asset, &sub)?;
+        eprintln!("{}: {line}", a.take.name);
+        actors.push(a);
+    }
+    let first =
+        actors.first().ok_or_else(|| super::RenderError::Content { file: name.into(), what: "no trial".into() })?;
+    let cams = resized(super::cameras(&first.take, rig, seed)?, size);
+    let mixed = scene_seed(seed, name);
+    Ok(Renderer::new(Gpu::new()?, actors, cams, super::look::scene(mixed), mixed))
+}
+
 /// The rig's cameras at `size` (px) where given: the same position, orientation, focal length
 /// and sensor, the intrinsics of the new image size (horizontal fit, principal point at the
 /// centre), as [`Camera::new`] makes them.
