@@ -33,7 +33,7 @@ pub fn render<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let name = trial.file_stem().map_or("trial".into(), |s| s.to_string_lossy().into_owned());
     let run = || -> Result<_, smocap::render::RenderError> {
-        let mut r = scene_renderer(std::slice::from_ref(&trial), cameras.as_deref(), size, seed, &name)?;
+        let mut r = scene_renderer(std::slice::from_ref(&trial), cameras.as_deref(), size, seed, &name, None)?;
         let take_frames = &r.actors[0].take.frames;
         let at: Vec<usize> = match &frames {
             None => (0..r.len()).collect(),

@@ -32,6 +32,10 @@ pub struct RenderArgs {
     /// Seed of the looks (skin tone, clothing, light, background, floor) and the default rig.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// A folder of PNG pictures: each scene gets one (chosen by the seed) behind the bodies,
+    /// instead of the floor and a plain colour.
+    #[arg(long, value_name = "DIR")]
+    pub backgrounds: Option<PathBuf>,
     /// Draw all the given trials' subjects in one scene (cameras around the first), into `--out`.
     #[arg(long)]
     pub together: bool,
@@ -79,7 +83,7 @@ fn trials(inputs: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
 
 /// Renders `files` as one scene into `dir`; the summary is also written as `dir/render.json`.
 fn render_scene(a: &RenderArgs, files: &[PathBuf], dir: &Path, name: &str) -> anyhow::Result<video_out::Rendered> {
-    let mut r = video::scene_renderer(files, a.cameras.as_deref(), a.size, a.seed, name)?;
+    let mut r = video::scene_renderer(files, a.cameras.as_deref(), a.size, a.seed, name, a.backgrounds.as_deref())?;
     let frames: Vec<usize> = (0..r.len()).step_by(a.every).collect();
     let done = video_out::render_to_dir(&mut r, &frames, dir, !a.quiet)?;
     let summary = serde_json::json!({

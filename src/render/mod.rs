@@ -6,6 +6,7 @@
 //! Input is a [`take::Take`]: a converted MCAP file read back, or a trial `solve` just solved;
 //! everything is placed in the Z-up `world` of the MCAP `/tf` tree (metres, seconds).
 
+pub mod backdrop;
 pub mod coco;
 pub mod look;
 pub mod png_out;

@@ -46,6 +46,8 @@ pub struct Keypoints {
 /// Draws frames of one scene: the actors share the cameras, the floor and the lighting.
 pub struct Renderer {
     pub actors: Vec<Actor>,
+    /// A picture behind the bodies instead of the floor and background colour.
+    pub backdrop: Option<super::backdrop::Backdrop>,
     pub cameras: Vec<Camera>,
     pub scene: Scene,
     pub labels: Vec<Labels>,
@@ -114,6 +116,7 @@ impl Renderer {
         let pose = actors.iter().map(|a| (PoseWorkspace::new(&a.take.model, &a.body), vec![0.0; a.take.model.ny()]));
         let kin = actors.iter().map(|a| Workspace::new(&a.take.model)).collect();
         Renderer {
+            backdrop: None,
             pose: pose.collect(),
             kin,
             surface_at: vec![Vec::new(); actors.len()],
@@ -162,7 +165,11 @@ impl Renderer {
         }
         self.drawn = Some(i);
         self.raster.set_pose(&self.vertices, self.origin);
-        self.raster.draw(&self.cameras, &self.scene, out)
+        self.raster.draw(&self.cameras, &self.scene, out)?;
+        if let Some(b) = &self.backdrop {
+            out.iter_mut().for_each(|img| b.composite(img));
+        }
+        Ok(())
     }
 
     /// The keypoint names of subject `k` (surface keypoints, joint centres named by their body,
@@ -236,13 +243,14 @@ pub fn scene_seed(seed: u64, name: &str) -> u64 {
 /// The renderer `smocap render` makes of converted trials `files` (one scene; the first one's
 /// subject frame places the default rig): each subject dressed (its summary line on stderr), the
 /// rig `rig` or the default one perturbed by `seed`, at `size`, the looks of `seed` mixed with
-/// `name`.
+/// `name`, and where `backgrounds` names a folder one of its PNG pictures behind the bodies.
 pub fn scene_renderer(
     files: &[std::path::PathBuf],
     rig: Option<&std::path::Path>,
     size: Option<(u32, u32)>,
     seed: u64,
     name: &str,
+    backgrounds: Option<&std::path::Path>,
 ) -> Result<Renderer, super::RenderError> {
     let asset = BodyAsset::shipped()?;
     let mut actors = Vec::with_capacity(files.len());
@@ -258,7 +266,18 @@ pub fn scene_renderer(
         actors.first().ok_or_else(|| super::RenderError::Content { file: name.into(), what: "no trial".into() })?;
     let cams = resized(super::cameras(&first.take, rig, seed)?, size);
     let mixed = scene_seed(seed, name);
-    Ok(Renderer::new(Gpu::new()?, actors, cams, super::look::scene(mixed), mixed))
+    let mut scene = super::look::scene(mixed);
+    let backdrop = match backgrounds {
+        Some(dir) => {
+            let all = super::backdrop::pictures(dir)?;
+            scene.lighting.draw_floor = false;
+            Some(super::backdrop::Backdrop::read(&all[(mixed % all.len() as u64) as usize])?)
+        }
+        None => None,
+    };
+    let mut r = Renderer::new(Gpu::new()?, actors, cams, scene, mixed);
+    r.backdrop = backdrop;
+    Ok(r)
 }
 
 /// The rig's cameras at `size` (px) where given: the same position, orientation, focal length
