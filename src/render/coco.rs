@@ -43,7 +43,17 @@ pub struct Annotation<'a> {
 /// A COCO file being written.
 pub struct CocoWriter {
     path: PathBuf,
-    parts: [(PathBuf, BufWriter<std::fs::File>, bool); 2],
+    parts: [(PathBuf, Option<BufWriter<std::fs::File>>, bool); 2],
+}
+
+impl Drop for CocoWriter {
+    /// The part files go, whether the file was finished or an error stopped the render.
+    fn drop(&mut self) {
+        for (p, w, _) in &mut self.parts {
+            drop(w.take());
+            let _ = std::fs::remove_file(p);
+        }
+    }
 }
 
 fn io(path: &Path) -> impl Fn(std::io::Error) -> RenderError + '_ {
@@ -58,13 +68,14 @@ impl CocoWriter {
             p.push(format!(".{k}.part{}", std::process::id()));
             let p = PathBuf::from(p);
             let f = std::fs::File::create(&p).map_err(io(&p))?;
-            Ok((p, BufWriter::new(f), false))
+            Ok((p, Some(BufWriter::new(f)), false))
         };
         Ok(CocoWriter { path: path.to_path_buf(), parts: [part("images")?, part("annotations")?] })
     }
 
     fn push(&mut self, k: usize, v: &impl Serialize) -> Result<(), RenderError> {
         let (p, w, started) = &mut self.parts[k];
+        let w = w.as_mut().expect("open until dropped");
         if std::mem::replace(started, true) {
             w.write_all(b",\n").map_err(io(p))?;
         }
@@ -80,7 +91,7 @@ impl CocoWriter {
     }
 
     /// Joins the parts under `head` (the file's other members: info, camera, categories).
-    pub fn finish(self, head: &serde_json::Map<String, Value>) -> Result<(), RenderError> {
+    pub fn finish(mut self, head: &serde_json::Map<String, Value>) -> Result<(), RenderError> {
         let mut tmp = self.path.as_os_str().to_owned();
         tmp.push(format!(".tmp{}", std::process::id()));
         let tmp = PathBuf::from(tmp);
@@ -89,15 +100,13 @@ impl CocoWriter {
         let head = serde_json::to_string(head).expect("JSON values serialise");
         out.write_all(&head.as_bytes()[..head.len() - 1]).map_err(&err)?;
         out.write_all(if head.len() > 2 { b",\n" } else { b"\n" }).map_err(&err)?;
-        for (k, (p, w, _)) in self.parts.into_iter().enumerate() {
-            let f = w.into_inner().map_err(|e| io(&p)(e.into_error()))?;
-            drop(f);
+        for (k, (p, w, _)) in self.parts.iter_mut().enumerate() {
+            drop(w.take().expect("open until dropped").into_inner().map_err(|e| io(p)(e.into_error()))?);
             out.write_all(if k == 0 { b"\"images\": [\n" } else { b"],\n\"annotations\": [\n" }).map_err(&err)?;
-            std::io::copy(&mut std::fs::File::open(&p).map_err(io(&p))?, &mut out).map_err(&err)?;
-            std::fs::remove_file(&p).map_err(io(&p))?;
+            std::io::copy(&mut std::fs::File::open(&p).map_err(io(p))?, &mut out).map_err(&err)?;
         }
         out.write_all(b"]}\n").map_err(&err)?;
         out.into_inner().map_err(|e| err(e.into_error()))?.sync_all().map_err(&err)?;
-        std::fs::rename(&tmp, &self.path).map_err(&err)
+        std::fs::rename(&tmp, &self.path).map_err(&err) // the part files go on drop
     }
 }

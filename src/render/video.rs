@@ -56,6 +56,8 @@ pub struct Renderer {
     vertices: Vec<[f32; 3]>,
     pose: Vec<(PoseWorkspace, Vec<f64>)>,
     kin: Vec<Workspace>,
+    /// Per subject, the bodies, joints and markers of the frame drawn last.
+    posed: Vec<Option<super::take::Pose>>,
     surface: SurfaceKeypoints,
     /// Per subject, each surface keypoint's kind (inside: its body, the largest influence's).
     surface_kinds: Vec<Vec<Kind>>,
@@ -119,6 +121,7 @@ impl Renderer {
             backdrop: None,
             pose: pose.collect(),
             kin,
+            posed: actors.iter().map(|_| None).collect(),
             surface_at: vec![Vec::new(); actors.len()],
             surface_kinds: kinds,
             surface,
@@ -162,6 +165,7 @@ impl Renderer {
             a.body.pose(&a.take.model, y, ws);
             self.vertices.extend_from_slice(&ws.vertices);
             self.surface.evaluate(&ws.vertices, &mut self.surface_at[k]);
+            self.posed[k] = Some(a.take.pose(i, &mut self.kin[k]));
         }
         self.drawn = Some(i);
         self.raster.set_pose(&self.vertices, self.origin);
@@ -195,8 +199,7 @@ impl Renderer {
     /// visibility tested on the images, the box and area from the mask.
     pub fn keypoints(&mut self, k: usize, i: usize, c: usize, img: &Images, out: &mut Keypoints) {
         assert_eq!(self.drawn, Some(i), "keypoints of the frame drawn last");
-        let take = &self.actors[k].take;
-        let pose = take.pose(i, &mut self.kin[k]);
+        let pose = self.posed[k].as_ref().expect("drawn");
         let ns = self.surface_at[k].len();
         let surface = self.surface_at[k].iter().map(|p| Vector3::new(p[0], p[1], p[2]));
         let cam = &self.cameras[c];
