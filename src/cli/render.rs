@@ -90,6 +90,8 @@ fn render_scene(a: &RenderArgs, files: &[PathBuf], dir: &Path, name: &str) -> an
         "trials": files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>(),
         "frames": done.frames, "cameras": done.cameras, "seconds": done.seconds,
         "frames_per_s": done.frames_per_s, "adapter": done.adapter, "seed": a.seed, "every": a.every,
+        "phases_s": { "pose": done.phases.pose_s, "draw": done.phases.draw_s, "keypoints": done.keypoints_s,
+                      "writers_wait": done.writers_wait_s },
     });
     render::png_out::write_atomic(
         &dir.join("render.json"),

@@ -43,9 +43,20 @@ pub struct Keypoints {
     pub area: usize,
 }
 
+/// Wall time (s) of [`Renderer::draw`]'s phases, summed over frames.
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub struct Phases {
+    /// Posing (forward kinematics, skinning), surface keypoints, vertex normals and the upload.
+    pub pose_s: f64,
+    /// The render passes and the read-back (on lavapipe: the rasterization itself).
+    pub draw_s: f64,
+}
+
 /// Draws frames of one scene: the actors share the cameras, the floor and the lighting.
 pub struct Renderer {
     pub actors: Vec<Actor>,
+    /// Time spent so far, by phase.
+    pub phases: Phases,
     /// A picture behind the bodies instead of the floor and background colour.
     pub backdrop: Option<super::backdrop::Backdrop>,
     pub cameras: Vec<Camera>,
@@ -118,6 +129,7 @@ impl Renderer {
         let pose = actors.iter().map(|a| (PoseWorkspace::new(&a.take.model, &a.body), vec![0.0; a.take.model.ny()]));
         let kin = actors.iter().map(|a| Workspace::new(&a.take.model)).collect();
         Renderer {
+            phases: Phases::default(),
             backdrop: None,
             pose: pose.collect(),
             kin,
@@ -157,6 +169,7 @@ impl Renderer {
 
     /// Draws frame `i` (position in the takes) through every camera into `out`.
     pub fn draw(&mut self, i: usize, out: &mut [Images]) -> Result<(), RasterError> {
+        let t = std::time::Instant::now();
         self.vertices.clear();
         for (k, (a, (ws, y))) in self.actors.iter().zip(&mut self.pose).enumerate() {
             let nq = a.take.model.nq();
@@ -169,7 +182,10 @@ impl Renderer {
         }
         self.drawn = Some(i);
         self.raster.set_pose(&self.vertices, self.origin);
+        self.phases.pose_s += t.elapsed().as_secs_f64();
+        let t = std::time::Instant::now();
         self.raster.draw(&self.cameras, &self.scene, out)?;
+        self.phases.draw_s += t.elapsed().as_secs_f64();
         if let Some(b) = &self.backdrop {
             out.iter_mut().for_each(|img| b.composite(img));
         }

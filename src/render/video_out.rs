@@ -21,6 +21,11 @@ pub struct Rendered {
     pub seconds: f64,
     pub frames_per_s: f64,
     pub adapter: String,
+    /// Wall time (s) drawing ([`super::video::Phases`]), testing keypoints and writing COCO
+    /// records, and waiting for the PNG writers (their queue full).
+    pub phases: super::video::Phases,
+    pub keypoints_s: f64,
+    pub writers_wait_s: f64,
     /// Written videos, or why none.
     pub mp4: Result<Vec<String>, String>,
 }
@@ -107,6 +112,7 @@ pub fn render_to_dir(r: &mut Renderer, frames: &[usize], dir: &Path, progress: b
         if progress { indicatif::ProgressDrawTarget::stderr() } else { indicatif::ProgressDrawTarget::hidden() },
     );
     let max_label = r.max_label();
+    let mut waits = [0.0f64; 2];
     let drawn = std::thread::scope(|s| -> Result<(), RenderError> {
         let workers: Vec<_> = (0..threads)
             .map(|_| {
@@ -115,7 +121,7 @@ pub fn render_to_dir(r: &mut Renderer, frames: &[usize], dir: &Path, progress: b
                 s.spawn(move || writer(dir, names, max_label, jobs, back))
             })
             .collect();
-        let result = draw_all(r, frames, &names, &mut cocos, &job_tx, &back_rx, &bar);
+        let result = draw_all(r, frames, &names, &mut cocos, (&job_tx, &back_rx), &bar, &mut waits);
         drop(job_tx);
         for w in workers {
             w.join().expect("a writer thread panicked")?;
@@ -135,6 +141,9 @@ pub fn render_to_dir(r: &mut Renderer, frames: &[usize], dir: &Path, progress: b
         seconds,
         frames_per_s: frames.len() as f64 / seconds.max(1e-9),
         adapter: r.adapter().to_string(),
+        phases: r.phases,
+        keypoints_s: waits[0],
+        writers_wait_s: waits[1],
         mp4,
     })
 }
@@ -144,9 +153,9 @@ fn draw_all(
     frames: &[usize],
     names: &[String],
     cocos: &mut [CocoWriter],
-    jobs: &mpsc::SyncSender<Job>,
-    back: &mpsc::Receiver<Images>,
+    (jobs, back): (&mpsc::SyncSender<Job>, &mpsc::Receiver<Images>),
     bar: &indicatif::ProgressBar,
+    waits: &mut [f64; 2],
 ) -> Result<(), RenderError> {
     let mut images: Vec<Images> = vec![Images::default(); names.len()];
     let mut kp = Keypoints::default();
@@ -155,6 +164,7 @@ fn draw_all(
         r.draw(i, &mut images)?;
         let frame = r.actors[0].take.frames[i];
         for (c, coco) in cocos.iter_mut().enumerate() {
+            let t = std::time::Instant::now();
             let [rgb, mask, depth] = frame_files(&names[c], frame);
             let (width, height) = images[c].size;
             let time_s = r.actors[0].take.times[i];
@@ -185,7 +195,11 @@ fn draw_all(
             }
             let spare = back.try_recv().unwrap_or_default();
             let images = std::mem::replace(&mut images[c], spare);
-            if jobs.send(Job { camera: c, frame, images }).is_err() {
+            let sent = std::time::Instant::now();
+            waits[0] += (sent - t).as_secs_f64();
+            let full = jobs.send(Job { camera: c, frame, images }).is_err();
+            waits[1] += sent.elapsed().as_secs_f64();
+            if full {
                 // A writer stopped on an error; it is reported when the writers are joined.
                 return Ok(());
             }
