@@ -9,7 +9,7 @@ cd "$(dirname "$0")/.."
 PY="${1:-python3}"
 INC="$("$PY" -c 'import grpc_tools, os; print(os.path.join(os.path.dirname(grpc_tools.__file__), "_proto"))')"
 mkdir -p proto/descriptors
-for f in foxglove/schemas smocap/smocap; do
+for f in foxglove/schemas smocap/smocap smocap/unfittable; do
     name="$(basename "$f")"
     "$PY" -m grpc_tools.protoc -Iproto -I"$INC" --include_imports \
         --descriptor_set_out="proto/descriptors/$name.fds" "proto/$f.proto"

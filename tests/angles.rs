@@ -330,6 +330,7 @@ fn compare_reads_plug_in_gait_angles_by_time_through_the_shipped_map() {
             quantity: smocap::eval::compare::Quantity::Angle,
             values: knee.iter().step_by(2).map(|v| v + 7.0).collect(),
         }],
+        unfittable: Vec::new(),
     };
     let opt = CompareOptions { reference_shift_s: 0.5, ..Default::default() };
     let c = compare(&ours, &vicon, &opt).expect("compares");

@@ -44,6 +44,7 @@ fn a_knee_axis_turned_by_a_known_angle_is_recovered_within_half_a_degree() {
             Series { name: "knee_angle_r".into(), quantity: Quantity::Angle, values: f },
             Series { name: "knee_adduction_r".into(), quantity: Quantity::Angle, values: a },
         ],
+        unfittable: Vec::new(),
     };
     let pairs = knee_pairs(&AngleMap::plug_in_gait());
     assert_eq!(pairs.len(), 2, "{pairs:?}");

@@ -189,9 +189,15 @@ fn project_writes_coco_json_csv_cameras_and_metrics_for_a_converted_shared_trial
         let coco: Value =
             serde_json::from_slice(&std::fs::read(out.join(format!("{cam}.coco.json"))).unwrap()).unwrap();
         assert_eq!(coco["images"].as_array().unwrap().len(), 16, "151 frames, every 10th");
-        assert_eq!(coco["annotations"].as_array().unwrap().len(), 32, "model and observed per image");
+        assert_eq!(coco["annotations"].as_array().unwrap().len(), 48, "model, observed and body per image");
         let visible = coco["annotations"][0]["num_keypoints"].as_u64().unwrap();
         assert!(visible > 30, "{cam}: {visible} keypoints visible");
+        // the body's surface keypoints: COCO-17 and the feet, every one in the image
+        let body = &coco["categories"][2];
+        assert_eq!(body["name"], "body");
+        assert_eq!(body["keypoints"].as_array().unwrap().len(), 23);
+        let a = coco["annotations"].as_array().unwrap().iter().find(|a| a["category_id"] == 3).unwrap();
+        assert_eq!(a["num_keypoints"].as_u64().unwrap(), 23, "{cam}");
     }
     let metrics: Value = serde_json::from_slice(&std::fs::read(out.join("metrics.json")).unwrap()).unwrap();
     let mm = metrics["marker_error_mm"].as_f64().unwrap();
@@ -199,7 +205,11 @@ fn project_writes_coco_json_csv_cameras_and_metrics_for_a_converted_shared_trial
     for c in metrics["cameras"].as_array().unwrap() {
         let px = c["marker_error_px"].as_f64().unwrap();
         assert!(px > 0.1 && px < 20.0, "{px} px");
+        let vpx = c["virtual_marker_error_px"].as_f64().unwrap();
+        assert!(vpx > 0.0 && vpx < 1.5, "virtual markers {vpx} px");
     }
+    let vmm = metrics["virtual_marker_error_mm"].as_f64().unwrap();
+    assert!(vmm > 0.0 && vmm < 10.0, "virtual markers {vmm} mm");
     let cams: Value = serde_json::from_slice(&std::fs::read(out.join("cameras.json")).unwrap()).unwrap();
     assert_eq!(cams["cameras"].as_array().unwrap().len(), 2);
     assert!(std::fs::metadata(out.join("keypoints.csv")).unwrap().len() > 1000);

@@ -102,16 +102,34 @@ fn displaced_segments_are_reported_as_bad_data_and_the_trial_does_not_fail() {
         step(&yc),
         step(&yb)
     );
-    // No coordinate jumps by more than the truth's largest step + 10°, or, for one the clean
-    // solve already moves more (forearm pronation, barely observed), than the clean solve + 10°.
-    for ((&j, c), b) in rot.iter().zip(steps(&yc)).zip(steps(&yb)) {
+    // No coordinate jumps by more than the truth's largest step + 10° into, inside or out of a
+    // window (the bound, where the continuity of unfittable frames acts). Elsewhere the
+    // frames fit and are the clean solve's (within 1°, below), steps included: the clean solve's
+    // own steps in a barely observed coordinate (forearm pronation: up to 13.7° here, on frames
+    // that fit to 3 mm) are left to it.
+    let touches = |f: usize| inside(f) || inside(f + 1);
+    for (&j, c) in rot.iter().zip(steps(&yc)) {
         let name = &ctx.model.coordinates[j].name;
+        let step_at = |y: &[Vec<f64>], f: usize| (y[f + 1][j] - y[f][j]).abs().to_degrees();
+        let (mut at_windows, mut elsewhere) = ((0.0f64, 0usize), 0.0f64);
+        for f in 0..yb.len() - 1 {
+            if touches(f) {
+                if step_at(&yb, f) > at_windows.0 {
+                    at_windows = (step_at(&yb, f), f);
+                }
+            } else {
+                elsewhere = elsewhere.max(step_at(&yb, f) - step_at(&yc, f));
+            }
+        }
         assert!(
-            b <= truth_step.max(c) + 10.0,
-            "{name}: largest step {b:.2}° (clean solve {c:.2}°, truth {truth_step:.2}°)"
+            at_windows.0 <= truth_step + 10.0,
+            "{name}: a step of {:.2}° at frame {} of a window (truth's largest {truth_step:.2}°)",
+            at_windows.0,
+            at_windows.1
         );
-        if b > truth_step + 10.0 {
-            eprintln!("  {name}: largest step {b:.2}° (clean solve {c:.2}°)");
+        assert!(elsewhere < 1.0, "{name}: outside the windows a step {elsewhere:.2}° larger than the clean solve's");
+        if c > truth_step + 10.0 {
+            eprintln!("  {name}: the clean solve's own largest step {c:.2}°; at the windows {:.2}°", at_windows.0);
         }
     }
     assert!(outside < 1.0, "outside the windows {outside:.3}° from the clean solve");
@@ -140,4 +158,78 @@ fn a_fast_clean_arm_swing_is_followed() {
     assert!(speed >= 1500.0, "{speed}°/s");
     assert!(err < 5.0, "the swing is not followed: error up to {err:.2}°");
     assert!(r.marker_errors.unfittable.is_empty());
+}
+
+/// `smocap convert` and `smocap compare` on an archive trial whose right upper arm's markers are
+/// displaced for 6 frames: the summary and stderr report the run as bad data (the trial `ok`), the
+/// MCAP file carries it on `/smocap/unfittable`, and `compare` lists the window, its frames
+/// included in the statistics or, with `--exclude-unfittable`, left out.
+#[test]
+fn convert_and_compare_report_a_displaced_window() {
+    use smocap::archive::config::SyntheticSpec;
+    use std::process::Command;
+    let dir = std::env::temp_dir().join(format!("smocap-unfittable-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let spec = SyntheticSpec { subjects: 1, trials: 1, frames: 200, seed: 11 };
+    smocap::archive::synthetic::generate(&spec, &dir.join("data")).unwrap();
+    let trc = dir.join("data/subj01/walk01.trc");
+    let mut t = smocap::io::read_markers(&trc).unwrap();
+    displace(&mut t, &["RUPA", "RELB", "RMEL"], 60..66, [0.06, 0.08, -0.05]);
+    smocap::io::trc::write_trc(&trc, &t, "mm").unwrap();
+    let toml = dir.join("datasets.toml");
+    std::fs::write(
+        &toml,
+        "[[dataset]]\nname = \"lab\"\nroot = \"data\"\ntrials = [\"*/walk*.trc\"]\nsubject = \"{subject}/{trial}.trc\"\nstatic = \"{subject}/static.trc\"\n",
+    )
+    .unwrap();
+    let smocap = |args: &[&str]| Command::new(env!("CARGO_BIN_EXE_smocap")).args(args).output().unwrap();
+    let (out, summary) = (dir.join("out"), dir.join("summary.json"));
+    let o = smocap(
+        &["convert", toml.to_str().unwrap(), "--out", out.to_str().unwrap(), "--report-json"]
+            .into_iter()
+            .chain([summary.to_str().unwrap(), "--quiet"])
+            .collect::<Vec<_>>(),
+    );
+    let (stdout, stderr) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "{stderr}");
+    eprintln!("{stdout}{stderr}");
+    let s: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    let trial = &s["trials"][0];
+    assert_eq!(trial["status"], "ok", "{trial}");
+    let runs = trial["unfittable"].as_array().unwrap_or_else(|| panic!("no unfittable runs: {trial}"));
+    assert_eq!(runs.len(), 1, "{runs:?}");
+    let (first, last) = (runs[0]["first"].as_u64().unwrap(), runs[0]["last"].as_u64().unwrap());
+    assert!(first >= 60 && last < 66, "{runs:?}");
+    assert_eq!(runs[0]["cause"], "data");
+    assert!(trial["reason"].as_str().is_some_and(|r| r.starts_with("the data is bad here")), "{trial}");
+    assert!(
+        stdout.contains("unfittable frames: 1 runs in 1 trials (1 blamed on the data, 0 on the model)"),
+        "{stdout}"
+    );
+    // The MCAP channel, read back as the readers do.
+    let mcap = out.join("lab/subj01/walk01.mcap");
+    let rec = smocap::archive::export::read_trial_record(&mcap).unwrap();
+    let u = rec.unfittable.expect("a /smocap/unfittable message");
+    assert_eq!(u.runs.len(), 1);
+    assert_eq!((u.runs[0].first_frame as u64, u.runs[0].last_frame as u64), (first, last));
+    assert_eq!(u.runs[0].cause, "data");
+    assert!(
+        u.runs[0].markers.iter().any(|m| ["RUPA", "RELB", "RMEL"].contains(&m.as_str())),
+        "{:?}",
+        u.runs[0].markers
+    );
+    assert!(u.reason.starts_with("the data is bad here"), "{}", u.reason);
+    // `compare` (against itself: the statistics are zero either way) lists the window.
+    let m = mcap.to_str().unwrap();
+    for (extra, how) in
+        [(None, "included in the statistics"), (Some("--exclude-unfittable"), "left out of the statistics")]
+    {
+        let o = smocap(&["compare", m, m].into_iter().chain(extra).collect::<Vec<_>>());
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let line = text.lines().find(|l| l.starts_with("unfittable frames ")).unwrap_or_else(|| panic!("{text}"));
+        assert!(line.starts_with(&format!("unfittable frames {first}–{last} (")), "{line}");
+        assert!(line.contains("the data is bad here: markers ") && line.contains(how), "{line}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -277,6 +277,12 @@ class Trial:
         ``markers``, ``first_frame``, ``last_frame``, ``first_time``, ``last_time`` (s),
         ``detected_frames``, ``action``, ``residual_before_mm``, ``residual_after_mm``); None
         for files written without it."""
+    @property
+    def unfittable(self) -> List[Dict[str, Any]]:
+        """The runs of unfittable frames (``/smocap/unfittable``; empty without one): dicts with
+        ``first_frame``, ``last_frame``, ``first_time``, ``last_time`` (s), ``frames``,
+        ``peak_rmse_mm``, ``limit_mm``, ``markers``, ``marker_error_mm``, ``rigid_move_mm``,
+        ``cause`` (``"data"`` or ``"model"``) and ``why``."""
     def to_mot(self, path: _PathLike) -> None:
         """Writes OpenSim's ``.mot`` as ``smocap export --mot`` does."""
     def body(self) -> Tuple[np.ndarray, np.ndarray]:

@@ -192,6 +192,39 @@ impl Trial {
         Ok(Some(d))
     }
 
+    /// The runs of unfittable frames, from `/smocap/unfittable` (an empty list for a trial
+    /// without one): dicts (pandas-ready) with `first_frame`, `last_frame`, `first_time`,
+    /// `last_time` (s, as in `q`'s index), `frames`, `peak_rmse_mm`, `limit_mm`, `markers`,
+    /// `marker_error_mm`, `rigid_move_mm`, `cause` ("data" or "model") and `why`.
+    #[getter]
+    fn unfittable<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        let secs = |frame: u32| {
+            self.rec
+                .frames
+                .iter()
+                .find(|f| f.state.frame == frame as usize)
+                .map(|f| f.state.time + self.rec.time_offset)
+        };
+        let runs = self.rec.unfittable.iter().flat_map(|u| &u.runs);
+        runs.map(|r| {
+            let d = PyDict::new(py);
+            d.set_item("first_frame", r.first_frame)?;
+            d.set_item("last_frame", r.last_frame)?;
+            d.set_item("first_time", secs(r.first_frame))?;
+            d.set_item("last_time", secs(r.last_frame))?;
+            d.set_item("frames", r.frames)?;
+            d.set_item("peak_rmse_mm", r.peak_rmse_mm)?;
+            d.set_item("limit_mm", r.limit_mm)?;
+            d.set_item("markers", &r.markers)?;
+            d.set_item("marker_error_mm", &r.marker_error_mm)?;
+            d.set_item("rigid_move_mm", r.rigid_move_mm)?;
+            d.set_item("cause", &r.cause)?;
+            d.set_item("why", &r.why)?;
+            Ok(d)
+        })
+        .collect()
+    }
+
     /// Writes the coordinates as OpenSim's `.mot`, as `smocap export --mot` does (the
     /// conversion's model gives the order and which coordinates are in degrees).
     fn to_mot(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
@@ -213,9 +246,9 @@ impl Trial {
                 let asset = smocap::body::BodyAsset::shipped().map_err(|e| e.to_string())?;
                 let sub =
                     smocap::body::SubjectBody { stature_m: self.rec.subject_stature_m, info: self.rec.subject_info };
-                let (body, _) =
-                    smocap::body::dress_subject(&take.model, &take.world_from_model, &asset, &take.scales, &sub)
-                        .map_err(|e| format!("binding the body mesh to the trial's model: {e}"))?;
+                let (body, _) = take
+                    .dress(&asset, &sub, &smocap::body::FitSettings::default())
+                    .map_err(|e| format!("binding the body mesh to the trial's model: {e}"))?;
                 let mut ws = smocap::body::PoseWorkspace::new(&take.model, &body);
                 let nq = take.model.nq();
                 let mut y = vec![0.0; take.model.ny()];

@@ -37,6 +37,8 @@ def test_convert_then_read_trial(cli, tmp):
     # The label quality control of the trial (clean synthetic labels: screened, nothing found).
     qc = trial.label_qc
     assert qc["mode"] == "repair" and qc["events"] == [] and qc["suspect"] is None and qc["rigid_pairs"] > 0
+    # No frame the model cannot fit: no /smocap/unfittable channel, an empty list.
+    assert trial.unfittable == []
     # The .mot as `smocap export --mot` writes it.
     trial.to_mot(tmp / "py.mot")
     cli("export", path, "--mot", tmp / "cli.mot")

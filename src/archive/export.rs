@@ -74,6 +74,8 @@ pub struct TrialRecord {
     pub stats: BTreeMap<usize, proto::SolverStats>,
     /// The `/smocap/label_qc` message, when the file has one.
     pub label_qc: Option<proto::LabelQc>,
+    /// The `/smocap/unfittable` message (runs of unfittable frames), when the file has one.
+    pub unfittable: Option<proto::Unfittable>,
     /// What the body mesh is shaped to: the calibrated stature and the given subject
     /// (`smocap.run` → `subject_stature_m`, `subject_height_m`, `subject_mass_kg`, `subject_sex`).
     pub subject_stature_m: Option<f64>,
@@ -134,6 +136,7 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
     let mut status = BTreeMap::new();
     let mut subject: Option<proto::Subject> = None;
     let mut label_qc: Option<proto::LabelQc> = None;
+    let mut unfittable: Option<proto::Unfittable> = None;
     let mut raw_states: Vec<proto::State> = Vec::new();
     let mut observed = BTreeMap::new();
     let mut stats = BTreeMap::new();
@@ -152,6 +155,7 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
             match topic {
                 "/smocap/subject" => subject = Some(proto::Subject::decode(data).map_err(|e| what(&e))?),
                 "/smocap/label_qc" => label_qc = Some(proto::LabelQc::decode(data).map_err(|e| what(&e))?),
+                "/smocap/unfittable" => unfittable = Some(proto::Unfittable::decode(data).map_err(|e| what(&e))?),
                 "/smocap/state" => raw_states.push(proto::State::decode(data).map_err(|e| what(&e))?),
                 "/markers" => {
                     let c = proto::PointCloud::decode(data).map_err(|e| what(&e))?;
@@ -216,6 +220,7 @@ pub fn parse_trial_record(buf: &[u8], file: &str) -> Result<TrialRecord, ExportE
         subject,
         stats,
         label_qc,
+        unfittable,
         subject_stature_m,
         subject_info,
     })

@@ -10,7 +10,8 @@
 //! a Z-up model; +90° about x for OpenSim's Y up); each body's frame is given in its parent
 //! body's frame, the root body's in `model`. Per frame: `/tf`, `/markers` (observed markers),
 //! `/smocap/state`, `/smocap/stats`; once, at the trial's first log time: `/scene` (the skeleton,
-//! frame-locked to the body frames, drawn at the calibrated scale) and `/smocap/subject`.
+//! frame-locked to the body frames, drawn at the calibrated scale) and `/smocap/subject`; once,
+//! after the last frame, at its log time, only for a trial with unfittable frames: `/smocap/unfittable`.
 //!
 //! Log times: [`WriterOptions::epoch_ns`] plus the frame's time since the trial's first sample
 //! (the readers record no absolute start time). Frames are written as they are solved: nothing
@@ -26,6 +27,7 @@ use crate::kinematics::cpu::{self, Workspace};
 use crate::model::proxy::ProxyKind;
 use crate::model::CoordinateKind;
 use crate::pipeline::input::label_qc::LabelQc;
+use crate::pipeline::running::unfittable::Unfittable;
 use crate::pipeline::{Context, SolvedFrame};
 use crate::solve::{Calibration, FrameStatus};
 use mcap::records::{MessageHeader, Metadata};
@@ -453,6 +455,42 @@ impl<'a> TrialWriter<'a> {
         }
     }
 
+    /// Writes `/smocap/unfittable` (adding its channel, [`schemas::UNFITTABLE`]) when `runs` is not
+    /// empty: the trial's runs of unfittable frames, at its last frame's log time. Call after the
+    /// last frame; a trial without such a run gets neither channel nor message.
+    pub fn unfittable(&mut self, runs: &[Unfittable]) -> Result<(), McapOutError> {
+        if runs.is_empty() {
+            return Ok(());
+        }
+        let at = |f: usize| Some(Timestamp::from_ns(self.log_ns(f)));
+        let ns = self.log_ns(self.trial.n_frames().saturating_sub(1));
+        let msg = proto::Unfittable {
+            timestamp: Some(Timestamp::from_ns(ns)),
+            runs: runs
+                .iter()
+                .map(|u| proto::UnfittableRun {
+                    first_frame: u.first as u32,
+                    last_frame: u.last as u32,
+                    first_time: at(u.first),
+                    last_time: at(u.last),
+                    frames: u.frames as u32,
+                    peak_rmse_mm: u.peak_rmse_mm,
+                    limit_mm: u.limit_mm,
+                    markers: u.markers.iter().map(|m| m.0.clone()).collect(),
+                    marker_error_mm: u.markers.iter().map(|m| m.1).collect(),
+                    rigid_move_mm: u.rigid_move_mm,
+                    cause: u.cause.clone(),
+                    why: u.why.clone(),
+                })
+                .collect(),
+            reason: crate::pipeline::running::unfittable::reason(runs).unwrap_or_default(),
+        };
+        let file = self.tmp.display().to_string();
+        let w = self.w.as_mut().expect("present until finished");
+        let ch = add_channel(w, &schemas::UNFITTABLE, "", "").map_err(|source| McapOutError::Mcap { file, source })?;
+        self.write(ch, 0, ns, &msg)
+    }
+
     /// Log time of frame `f` (ns): the epoch plus its time since the trial's first sample.
     fn log_ns(&self, f: usize) -> u64 {
         self.epoch_ns + (self.since_start(f).max(0.0) * 1e9).round() as u64
@@ -622,7 +660,14 @@ fn add_channel<W: std::io::Write + std::io::Seek>(
         ("length_unit", "m"),
         ("angle_unit", "rad"),
         ("log_time", "the epoch (smocap.run: epoch_ns) plus the frame's time since the trial's first sample"),
-        ("rate", if c.per_frame { "one message per frame" } else { "one message per trial, at its first log time" }),
+        (
+            "rate",
+            match (c.per_frame, c.topic == schemas::UNFITTABLE.topic) {
+                (true, _) => "one message per frame",
+                (false, false) => "one message per trial, at its first log time",
+                (false, true) => "one message per trial with unfittable frames, at its last frame's log time",
+            },
+        ),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), v.to_string()))

@@ -2,8 +2,8 @@
 //! well-known schemas (package `foxglove`, only the fields and messages smocap writes; the
 //! descriptor sets embedded in each file describe them fully) and smocap's own (package
 //! `smocap`). Enum fields are plain `i32` (their wire encoding). Field numbers must match
-//! `proto/foxglove/schemas.proto` and `proto/smocap/smocap.proto`; `tests/proto_schemas.rs`
-//! checks them against the embedded descriptors.
+//! `proto/foxglove/schemas.proto`, `proto/smocap/smocap.proto` and `proto/smocap/unfittable.proto`;
+//! `scripts/check_mcap.py` (`tests/python_checks.rs`) decodes every message with the descriptors.
 
 /// `google.protobuf.Timestamp`: seconds and nanoseconds since the Unix epoch.
 #[derive(Clone, Copy, PartialEq, prost::Message)]
@@ -345,4 +345,44 @@ pub struct LabelEvent {
     pub residual_before_mm: f64,
     #[prost(double, tag = "10")]
     pub residual_after_mm: f64,
+}
+
+/// `smocap.Unfittable`: a trial's runs of unfittable frames (`/smocap/unfittable`), once per trial.
+#[derive(Clone, PartialEq, prost::Message)]
+pub struct Unfittable {
+    #[prost(message, optional, tag = "1")]
+    pub timestamp: Option<Timestamp>,
+    #[prost(message, repeated, tag = "2")]
+    pub runs: Vec<UnfittableRun>,
+    #[prost(string, tag = "3")]
+    pub reason: String,
+}
+
+/// `smocap.UnfittableRun`: one run of unfittable frames (mm).
+#[derive(Clone, PartialEq, prost::Message)]
+pub struct UnfittableRun {
+    #[prost(uint32, tag = "1")]
+    pub first_frame: u32,
+    #[prost(uint32, tag = "2")]
+    pub last_frame: u32,
+    #[prost(message, optional, tag = "3")]
+    pub first_time: Option<Timestamp>,
+    #[prost(message, optional, tag = "4")]
+    pub last_time: Option<Timestamp>,
+    #[prost(uint32, tag = "5")]
+    pub frames: u32,
+    #[prost(double, tag = "6")]
+    pub peak_rmse_mm: f64,
+    #[prost(double, tag = "7")]
+    pub limit_mm: f64,
+    #[prost(string, repeated, tag = "8")]
+    pub markers: Vec<String>,
+    #[prost(double, repeated, tag = "9")]
+    pub marker_error_mm: Vec<f64>,
+    #[prost(double, tag = "10")]
+    pub rigid_move_mm: f64,
+    #[prost(string, tag = "11")]
+    pub cause: String,
+    #[prost(string, tag = "12")]
+    pub why: String,
 }

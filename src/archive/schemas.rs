@@ -8,6 +8,9 @@
 pub const FOXGLOVE_DESCRIPTORS: &[u8] = include_bytes!("../../proto/descriptors/schemas.fds");
 /// Serialized `google.protobuf.FileDescriptorSet` of `proto/smocap/smocap.proto`.
 pub const SMOCAP_DESCRIPTORS: &[u8] = include_bytes!("../../proto/descriptors/smocap.fds");
+/// Serialized `google.protobuf.FileDescriptorSet` of `proto/smocap/unfittable.proto` (a file of
+/// its own: the other channels' schema data is unchanged by it).
+pub const UNFITTABLE_DESCRIPTORS: &[u8] = include_bytes!("../../proto/descriptors/unfittable.fds");
 
 /// One channel of a converted trial.
 #[derive(Clone, Copy, Debug)]
@@ -81,5 +84,16 @@ pub const LABEL_QC: ChannelSpec = ChannelSpec {
     per_frame: false,
 };
 
-/// Every channel, in channel-id order.
+/// `/smocap/unfittable`: the trial's runs of unfittable frames (issue 32), once, at the last
+/// frame's log time; added after the last frame, and only when the trial has such a run (a clean
+/// trial's file is as before). Not in [`CHANNELS`].
+pub const UNFITTABLE: ChannelSpec = ChannelSpec {
+    topic: "/smocap/unfittable",
+    schema: "smocap.Unfittable",
+    descriptors: UNFITTABLE_DESCRIPTORS,
+    frame: "",
+    per_frame: false,
+};
+
+/// Every channel a file always has, in channel-id order.
 pub const CHANNELS: [ChannelSpec; 7] = [STATE, STATS, TF, MARKERS, SCENE, SUBJECT, LABEL_QC];

@@ -16,7 +16,9 @@ use crate::pipeline::input::file_frames::FileFrames;
 use crate::pipeline::input::frames::TrialFrames;
 use crate::pipeline::input::trial::SinkError;
 use crate::pipeline::results::verdict::{Judge, Verdict};
+use crate::pipeline::running::marker_errors::MarkerErrors;
 use crate::pipeline::running::stream::{solve_trials_streaming, TrialStream};
+use crate::pipeline::running::unfittable::Unfittable;
 use crate::pipeline::stats::P50P90;
 use crate::pipeline::{Context, SolvedFrame};
 use crate::solve::Calibration;
@@ -120,6 +122,10 @@ pub struct Solved {
     pub suspect: Option<String>,
     /// Label quality control events (recorded in the file's `smocap.run` as `label_qc`, JSON).
     pub label_qc: Vec<crate::pipeline::input::label_qc::LabelEvent>,
+    /// Runs of unfittable frames ([`crate::pipeline::running::unfittable`]; the file's
+    /// `/smocap/unfittable`), and the verdict's words for those blamed on the data.
+    pub unfittable: Vec<Unfittable>,
+    pub reason: Option<String>,
 }
 
 /// Solves `trial` and streams it to `out` (via its `.partial` file); `run` is the `smocap.run`
@@ -192,7 +198,9 @@ impl Collect {
     }
 }
 
-type Writing<'s, 'w> = std::thread::ScopedJoinHandle<'s, Result<TrialWriter<'w>, (usize, McapOutError)>>;
+/// The writer thread's result: the file so far and the marker errors of its frames.
+type Written<'w> = Result<(TrialWriter<'w>, MarkerErrors), (usize, McapOutError)>;
+type Writing<'s, 'w> = std::thread::ScopedJoinHandle<'s, Written<'w>>;
 
 /// [`solve_and_write`] for several trials of one subject solved together
 /// ([`crate::pipeline::running::stream::solve_trials_streaming`]: their segments share the lanes, so
@@ -271,21 +279,25 @@ fn start_writer<'s, 'w>(
     let mut writer =
         TrialWriter::create(job.out, ctx, job.trial.header(), &cal.calibration, &names, job.trial.label_qc(), opt)
             .map_err(|e| e.to_string())?;
+    // The marker errors (unfittable frames) are accumulated on the writer thread, off the solver's.
+    let mut errors = MarkerErrors::new(ctx, &cal.calibration);
     // Frames go over in batches of BATCH_FRAMES: one wake-up of the writer per batch, not
     // per frame (per-frame hand-over cost 7 % of a short trial's conversion in `perf`).
     let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<SolvedFrame>>(QUEUE_FRAMES / BATCH_FRAMES);
     let writing = std::thread::Builder::new()
         .name("smocap-writer".into())
-        .spawn_scoped(scope, move || -> Result<TrialWriter<'w>, (usize, McapOutError)> {
+        .spawn_scoped(scope, move || -> Written<'w> {
             for batch in rx {
                 for f in &batch {
                     writer.frame(f).map_err(|e| (f.index, e))?;
+                    let unsolved = f.bridged || f.stats.status == crate::solve::FrameStatus::TooFewMarkers;
+                    errors.frame(f.index, &f.proxies, &f.observed, unsolved);
                 }
                 if let Some(c) = frames_done {
                     c.fetch_add(batch.len() as u64, std::sync::atomic::Ordering::Relaxed);
                 }
             }
-            Ok(writer)
+            Ok((writer, errors))
         })
         .map_err(|e| format!("starting the writer thread: {e}"))?;
     Ok((tx, writing))
@@ -297,11 +309,11 @@ fn finish_trial(
     job: &TrialJob<'_>,
     cal: &Calibrated,
     solved: Result<crate::pipeline::StreamedTrial, String>,
-    written: std::thread::Result<Result<TrialWriter<'_>, (usize, McapOutError)>>,
+    written: std::thread::Result<Written<'_>>,
     c: Collect,
 ) -> Result<Solved, String> {
     let name = job.name;
-    let writer = match written {
+    let (mut writer, errors) = match written {
         Ok(Ok(w)) => w,
         Ok(Err((frame, e))) => return Err(format!("trial '{name}': frame {frame}: {e}")),
         Err(_) => return Err(format!("trial '{name}': the writer thread panicked")),
@@ -332,6 +344,8 @@ fn finish_trial(
         }
         Verdict::Ok => {}
     }
+    let unfittable = errors.finish().unfittable;
+    writer.unfittable(&unfittable).map_err(|e| e.to_string())?;
     writer.finish(&run, &cal.settings_json, cal.scaled_model.as_deref()).map_err(|e| e.to_string())?;
     let Collect { mut ms, it, mut rmse, secs, .. } = c;
     rmse.retain(|x: &f64| x.is_finite());
@@ -344,5 +358,7 @@ fn finish_trial(
         rmse_mm: (!rmse.is_empty()).then(|| P50P90::of(&rmse)),
         suspect: verdict.reason(),
         label_qc: qc.map(|q| q.events.clone()).unwrap_or_default(),
+        reason: crate::pipeline::running::unfittable::reason(&unfittable),
+        unfittable,
     })
 }

@@ -433,6 +433,34 @@ impl BodyAsset {
         Ok(BodyShape { joints: pts[nb..].to_vec(), vertices: pts[..nb].to_vec() })
     }
 
+    /// Basis component `k`: per point (body vertices, then joint cubes) its displacement (m)
+    /// per unit coefficient, flattened `x, y, z`.
+    pub fn component(&self, k: usize) -> &[f32] {
+        let n = self.mean.len();
+        &self.components[k * n..(k + 1) * n]
+    }
+
+    /// The spread (standard deviation) of each shape coefficient over adult phenotypes: every
+    /// parameter uniform in [0, 1], sampled on 512 points of a fixed low-discrepancy sequence
+    /// (additive recurrences of the six-dimensional golden ratio), so the same every call.
+    pub fn coefficient_spread(&self) -> Vec<f64> {
+        const N: usize = 512;
+        // the plastic-number generalisation of the golden ratio in six dimensions (Roberts)
+        let g = (0..30).fold(1.5f64, |x, _| (1.0 + x).powf(1.0 / 7.0));
+        let alpha: Vec<f64> = (1..=6).map(|k| 1.0 / g.powi(k)).collect();
+        let mut sum = vec![0.0; self.rank];
+        let mut sq = vec![0.0; self.rank];
+        for i in 0..N {
+            let u: Vec<f64> = alpha.iter().map(|a| (0.5 + a * (i + 1) as f64).fract()).collect();
+            let p = Phenotype { gender: u[0], age: u[1], muscle: u[2], weight: u[3], height: u[4], proportions: u[5] };
+            for (k, c) in self.coeffs(&p).into_iter().enumerate() {
+                sum[k] += c;
+                sq[k] += c * c;
+            }
+        }
+        sum.iter().zip(&sq).map(|(s, q)| (q / N as f64 - (s / N as f64).powi(2)).max(0.0).sqrt()).collect()
+    }
+
     /// The shape of a phenotype.
     pub fn shape_from(&self, p: &Phenotype) -> BodyShape {
         self.shape(&self.coeffs(p)).expect("coefficients of the basis' own rank")

@@ -13,6 +13,12 @@
 //! - a rank-20 shape basis over adults and the exact map from a [`Phenotype`] (gender, age,
 //!   muscle, weight, height, proportions, each in [0, 1]) to its coefficients.
 //!
+//! A subject's body ([`dress_subject_with`]): the phenotype from stature, sex and mass
+//! ([`subject`]), bound to the model's joint centres ([`bind`]), then its skin fitted to the
+//! subject's markers, stature and mass ([`fit`]); posed by linear-blend skinning ([`pose`]).
+//! Read off it: surface keypoints ([`keypoints`]), virtual markers ([`virtual_markers`]), marker
+//! to skin distances ([`skin_distance`]), soundness measures ([`metrics`]).
+//!
 //! **Units and frame.** Metres, in smocap's world frame: Z up, X forward (the figure faces
 //! +X), Y to the figure's left, as `models/fullbody.xml`. The origin is the source mesh's
 //! (roughly mid-body), not the floor. The mesh stands in an **A-pose** (upper arms about 45°
@@ -20,6 +26,7 @@
 
 pub mod asset;
 pub mod bind;
+pub mod fit;
 pub mod keypoints;
 pub mod metrics;
 pub mod obj;
@@ -27,10 +34,12 @@ pub mod pose;
 pub mod segments;
 pub mod skin_distance;
 pub mod subject;
+pub mod virtual_markers;
 
 pub use asset::{BodyAsset, BodyError, BodyShape, Phenotype, Skin};
 pub use bind::{bind, Binding, Influence};
+pub use fit::{FitSettings, ShapeFit};
 pub use keypoints::SurfaceKeypoints;
 pub use pose::{phenotype_for, Dressed, PoseWorkspace};
 pub use segments::{BindError, SegmentMap};
-pub use subject::{dress_subject, SubjectBody};
+pub use subject::{dress_subject, dress_subject_with, fit_poses, SubjectBody};

@@ -32,6 +32,8 @@ pub struct Dressed {
     pub target_stature: f64,
     /// Counter-clockwise seen from outside.
     pub triangles: Vec<[u32; 3]>,
+    /// The shaping to the subject's markers, where it was done ([`super::fit`]).
+    pub fit: Option<super::fit::ShapeFit>,
 }
 
 /// Scratch for posing: forward kinematics and the posed vertices (Z-up world, m).
@@ -141,6 +143,7 @@ impl Dressed {
             shape_stature: shape.stature(),
             target_stature: target,
             triangles: asset.triangles.clone(),
+            fit: None,
         }
     }
 

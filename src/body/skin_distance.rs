@@ -90,12 +90,38 @@ pub fn closest_on_triangle(p: Vector3<f64>, a: Vector3<f64>, b: Vector3<f64>, c:
     a + ab * (vb * denom) + ac * (vc * denom)
 }
 
-/// Signed distance (m) from `p` to the nearest of triangles `tris` (positive outside).
-pub fn signed_distance(vertices: &[[f32; 3]], triangles: &[[u32; 3]], tris: &[u32], p: Vector3<f64>) -> f64 {
-    let (mut best, mut best_cos, mut sign) = (f64::INFINITY, 0.0f64, 1.0);
+/// The skin point nearest a point: signed distance (m, positive outside), the triangle's
+/// vertices with the point's barycentric weights, and the outward unit direction along which
+/// the distance grows.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Nearest {
+    pub distance: f64,
+    pub vertices: [u32; 3],
+    pub weights: [f64; 3],
+    pub normal: Vector3<f64>,
+}
+
+/// Barycentric weights of `q` (in the plane of `abc`).
+fn barycentric(q: Vector3<f64>, a: Vector3<f64>, b: Vector3<f64>, c: Vector3<f64>) -> [f64; 3] {
+    let (v0, v1, v2) = (b - a, c - a, q - a);
+    let (d00, d01, d11, d20, d21) = (v0.dot(&v0), v0.dot(&v1), v1.dot(&v1), v2.dot(&v0), v2.dot(&v1));
+    let den = d00 * d11 - d01 * d01;
+    if den.abs() < 1e-30 {
+        return [1.0, 0.0, 0.0];
+    }
+    let v = (d11 * d20 - d01 * d21) / den;
+    let w = (d00 * d21 - d01 * d20) / den;
+    [1.0 - v - w, v, w]
+}
+
+/// The nearest point to `p` on triangles `tris` ([`Nearest`]). The sign is the side of the
+/// nearest triangle's plane (of the nearest at one distance, the one `p` is most squarely above).
+pub fn nearest_on_skin(vertices: &[[f32; 3]], triangles: &[[u32; 3]], tris: &[u32], p: Vector3<f64>) -> Nearest {
+    let (mut best, mut best_cos) = (f64::INFINITY, 0.0f64);
+    let mut out = Nearest { distance: f64::INFINITY, vertices: [0; 3], weights: [1.0, 0.0, 0.0], normal: Vector3::z() };
     for &t in tris {
-        let [i, j, k] = triangles[t as usize];
-        let (a, b, c) = (v3(vertices[i as usize]), v3(vertices[j as usize]), v3(vertices[k as usize]));
+        let tri = triangles[t as usize];
+        let [a, b, c] = tri.map(|i| v3(vertices[i as usize]));
         let q = closest_on_triangle(p, a, b, c);
         let d = (p - q).norm();
         if d > best + 1e-9 {
@@ -106,10 +132,57 @@ pub fn signed_distance(vertices: &[[f32; 3]], triangles: &[[u32; 3]], tris: &[u3
         if d < best - 1e-9 || cos.abs() > best_cos.abs() {
             best = best.min(d);
             best_cos = cos;
-            sign = if cos < 0.0 { -1.0 } else { 1.0 };
+            let sign = if cos < 0.0 { -1.0 } else { 1.0 };
+            let normal = if d > 1e-6 { (p - q) * (sign / d) } else { n.normalize() };
+            out = Nearest { distance: sign * d, vertices: tri, weights: barycentric(q, a, b, c), normal };
         }
     }
-    sign * best
+    out
+}
+
+/// Signed distance (m) from `p` to the nearest of triangles `tris` (positive outside).
+pub fn signed_distance(vertices: &[[f32; 3]], triangles: &[[u32; 3]], tris: &[u32], p: Vector3<f64>) -> f64 {
+    nearest_on_skin(vertices, triangles, tris, p).distance
+}
+
+/// What a model marker is to the skin.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MarkerKind {
+    /// On a bony landmark ([`crate::model::marker_classes`]: anatomical).
+    Landmark,
+    /// On the skin, standing off by a wand or cluster plate.
+    Other,
+    /// A point computed by other software: role `joint_centre` in `models/markers/roles.toml`
+    /// (a regression joint centre, a ground projection), or the midpoint of two markers of its
+    /// body (within 2 mm; OpenSim marker sets' `MidASIS`).
+    Computed,
+}
+
+/// Each model marker's [`MarkerKind`].
+pub fn marker_kinds(model: &Model) -> Vec<MarkerKind> {
+    let classes = crate::model::marker_classes(model, &[], &[]);
+    let roles = crate::model::roles::RoleTable::shipped();
+    let midpoint = |k: usize| {
+        let m = &model.markers[k];
+        let same: Vec<&crate::model::Marker> =
+            model.markers.iter().enumerate().filter(|(j, o)| *j != k && o.body == m.body).map(|(_, o)| o).collect();
+        same.iter()
+            .enumerate()
+            .any(|(i, a)| same[i + 1..].iter().any(|b| ((a.offset + b.offset) * 0.5 - m.offset).norm() < 0.002))
+    };
+    (0..model.markers.len())
+        .map(|k| {
+            if matches!(roles.role_of(&model.markers[k].name), Some((crate::model::roles::MarkerRole::JointCentre, _)))
+                || midpoint(k)
+            {
+                MarkerKind::Computed
+            } else if classes[k] == MarkerClass::Anatomical {
+                MarkerKind::Landmark
+            } else {
+                MarkerKind::Other
+            }
+        })
+        .collect()
 }
 
 /// One marker's signed distances to the skin over the frames.
@@ -117,10 +190,9 @@ pub fn signed_distance(vertices: &[[f32; 3]], triangles: &[[u32; 3]], tris: &[u3
 pub struct MarkerSkin {
     pub name: String,
     pub body: String,
-    /// A landmark (anatomical) marker ([`crate::model::marker_classes`]).
+    /// A landmark marker ([`MarkerKind::Landmark`]).
     pub landmark: bool,
-    /// A point computed by other software (role `joint_centre` in `models/markers/roles.toml`:
-    /// a regression joint centre, a ground projection), not a marker on the skin.
+    /// A computed point, not a marker on the skin ([`MarkerKind::Computed`]).
     pub computed: bool,
     pub distances: Vec<f64>,
 }
@@ -149,17 +221,16 @@ pub fn marker_skin_distances<'a>(
     states: impl IntoIterator<Item = &'a [f64]>,
 ) -> Vec<MarkerSkin> {
     let index = SkinIndex::new(model, body);
-    let classes = crate::model::marker_classes(model, &[], &[]);
-    let roles = crate::model::roles::RoleTable::shipped();
+    let kinds = marker_kinds(model);
     let mut out: Vec<MarkerSkin> = model
         .markers
         .iter()
-        .zip(&classes)
-        .map(|(m, c)| MarkerSkin {
+        .zip(&kinds)
+        .map(|(m, k)| MarkerSkin {
             name: m.name.clone(),
             body: model.bodies[m.body].name.clone(),
-            landmark: *c == MarkerClass::Anatomical,
-            computed: matches!(roles.role_of(&m.name), Some((crate::model::roles::MarkerRole::JointCentre, _))),
+            landmark: *k == MarkerKind::Landmark,
+            computed: *k == MarkerKind::Computed,
             distances: Vec::new(),
         })
         .collect();

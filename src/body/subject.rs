@@ -9,6 +9,7 @@
 //! is asked of the bound body at those scales (two rounds in [`Dressed::new`]).
 
 use super::asset::{BodyAsset, Phenotype};
+use super::fit::{fit_to_markers, FitSettings};
 use super::metrics::volume;
 use super::pose::{phenotype_for, Dressed, PoseWorkspace};
 use super::segments::BindError;
@@ -78,13 +79,28 @@ pub fn phenotype_for_subject(asset: &BodyAsset, sub: &SubjectBody) -> Phenotype 
 }
 
 /// The subject's body on `model` at `scales`, and a one-line summary of its height against
-/// the stature it was shaped to.
+/// the stature it was shaped to ([`dress_subject_with`] the default [`FitSettings`]).
 pub fn dress_subject(
     model: &Model,
     world_from_model: &UnitQuaternion<f64>,
     asset: &BodyAsset,
     scales: &[f64],
     sub: &SubjectBody,
+) -> Result<(Dressed, String), BindError> {
+    dress_subject_with(model, world_from_model, asset, scales, sub, &[], &FitSettings::default())
+}
+
+/// The subject's body: the phenotype from stature, sex and mass, bound to `model`, then shaped
+/// to the model's markers and the stature ([`fit_to_markers`], at the bind pose and `poses`:
+/// coordinates `q` of some of the trial's frames, see [`fit_poses`]) with `fit`.
+pub fn dress_subject_with(
+    model: &Model,
+    world_from_model: &UnitQuaternion<f64>,
+    asset: &BodyAsset,
+    scales: &[f64],
+    sub: &SubjectBody,
+    poses: &[&[f64]],
+    fit: &FitSettings,
 ) -> Result<(Dressed, String), BindError> {
     let mut p = phenotype_for_subject(asset, sub);
     let mut body = Dressed::new(model, world_from_model, asset, scales, sub.stature(), p)?;
@@ -118,6 +134,12 @@ pub fn dress_subject(
             }
         }
     }
+    if scales.len() == 3 * model.nb() {
+        let stature = sub.stature().unwrap_or(body.target_stature);
+        let volume = sub.info.mass_kg.map(|m| m / BODY_DENSITY);
+        body.fit = Some(fit_to_markers(model, &mut body, asset, scales, Some(stature), volume, poses, fit));
+        mass = posed_mass(model, &body, scales);
+    }
     let height = body.bind_pose_height(model, scales);
     let what = match (sub.stature_m, sub.info.height_m) {
         (Some(_), _) => "calibrated stature",
@@ -139,5 +161,24 @@ pub fn dress_subject(
     if let (Some(c), Some(g)) = (sub.stature_m, sub.info.height_m) {
         line += &format!("; given height {g:.3} m ({:+.1} mm from the calibrated)", 1e3 * (g - c));
     }
+    if let Some(f) = &body.fit {
+        line += &format!(
+            "; shaped to {} markers: landmarks' median |d − {:.0} mm| {:.1} → {:.1} mm at the bind pose",
+            f.markers_used,
+            fit.marker_radius_m * 1e3,
+            f.landmark_median_before_m * 1e3,
+            f.landmark_median_after_m * 1e3
+        );
+    }
     Ok((body, line))
+}
+
+/// Up to `n` of `frames` (each the model's coordinates `q`), evenly spaced, first and last
+/// included: the poses the skin is fitted at.
+pub fn fit_poses(frames: &[Vec<f64>], n: usize) -> Vec<&[f64]> {
+    match frames.len() {
+        0 => Vec::new(),
+        len if len <= n => frames.iter().map(|q| q.as_slice()).collect(),
+        len => (0..n).map(|i| frames[i * (len - 1) / (n - 1).max(1)].as_slice()).collect(),
+    }
 }

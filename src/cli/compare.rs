@@ -58,6 +58,10 @@ pub struct CompareArgs {
     /// Coordinates in the figure.
     #[arg(long, default_value_t = 6)]
     pub worst: usize,
+    /// Leave the frames of OURS's unfittable windows (a converted trial's `/smocap/unfittable`:
+    /// frames no pose fits) out of the statistics; they are included, and listed, by default.
+    #[arg(long)]
+    pub exclude_unfittable: bool,
     /// Exit 3 when any compared angle's RMSE exceeds this (degrees).
     #[arg(long)]
     pub max_rmse: Option<f64>,
@@ -85,7 +89,12 @@ pub fn run(a: CompareArgs) -> anyhow::Result<u8> {
     let ours = load_motion(&a.ours, map.as_ref())?;
     let reference = load_motion(&a.reference, map.as_ref())?;
     let coordinates = if a.core { CORE.iter().map(|s| s.to_string()).collect() } else { a.coordinates.clone() };
-    let opt = CompareOptions { tolerance_s: a.tolerance, reference_shift_s: a.shift, coordinates };
+    let opt = CompareOptions {
+        tolerance_s: a.tolerance,
+        reference_shift_s: a.shift,
+        coordinates,
+        exclude_unfittable: a.exclude_unfittable,
+    };
     let c = compare(&ours, &reference, &opt)?;
     print!("{}", table(&c));
     let pig;
@@ -166,6 +175,25 @@ pub fn table(c: &Comparison) -> String {
     }
     if !c.missing_in_ours.is_empty() {
         let _ = writeln!(s, "not in ours: {}", c.missing_in_ours.join(", "));
+    }
+    for u in &c.unfittable {
+        let w = &u.window;
+        let _ = writeln!(
+            s,
+            "unfittable frames {}–{} ({:.3}–{:.3} s, {}: markers {}): {} matched frames {}",
+            w.first,
+            w.last,
+            w.start_s,
+            w.end_s,
+            if w.cause == "data" { "the data is bad here" } else { "the model cannot reach them" },
+            w.markers.join(", "),
+            u.matched_frames,
+            if u.excluded {
+                "left out of the statistics"
+            } else {
+                "included in the statistics (--exclude-unfittable leaves them out)"
+            }
+        );
     }
     s
 }

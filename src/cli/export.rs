@@ -138,7 +138,7 @@ pub(super) fn dress_or_note(
     sub: &crate::body::SubjectBody,
 ) -> anyhow::Result<Option<crate::body::Dressed>> {
     let asset = crate::body::BodyAsset::shipped()?;
-    Ok(match crate::body::dress_subject(&take.model, &take.world_from_model, &asset, &take.scales, sub) {
+    Ok(match take.dress(&asset, sub, &crate::body::FitSettings::default()) {
         Ok((d, line)) => {
             eprintln!("{}: {line}", take.name);
             Some(d)
@@ -166,9 +166,9 @@ fn write_meshes(
     use anyhow::Context as _;
     let take = crate::render::Take::from_record(rec, file)?;
     let asset = BodyAsset::shipped()?;
-    let (body, line) =
-        crate::body::dress_subject(&take.model, &take.world_from_model, &asset, &take.scales, &subject_body(rec))
-            .context("binding the body mesh to the trial's model")?;
+    let (body, line) = take
+        .dress(&asset, &subject_body(rec), &crate::body::FitSettings::default())
+        .context("binding the body mesh to the trial's model")?;
     eprintln!("{}: {line}", take.name);
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let wanted = if frames.is_empty() { vec![*take.frames.first().unwrap_or(&0)] } else { frames.to_vec() };

@@ -29,6 +29,10 @@ pub struct ProjectArgs {
     /// with `--cameras` (world coordinates); writes `cameras.json` and `points.csv`.
     #[arg(long, conflicts_with = "files", requires = "cameras")]
     pub points: Option<PathBuf>,
+    /// Leave out the body mesh's ground truth (its surface keypoints, COCO-17 plus heel, big and
+    /// small toe, as category `body`; the virtual markers and their spatial and pixel error).
+    #[arg(long)]
+    pub no_body: bool,
     /// Also write the metrics of every trial as one JSON array here.
     #[arg(long)]
     pub report_json: Option<PathBuf>,
@@ -66,7 +70,13 @@ pub fn run(a: ProjectArgs) -> anyhow::Result<u8> {
             take.name = rel.clone();
         }
         let cams = render::cameras(&take, a.cameras.as_deref(), a.rig_seed)?;
-        let m = project::write_ground_truth(&take, &cams, &take.strided(a.stride), dir)?;
+        let mut body = if a.no_body {
+            None
+        } else {
+            let sub = crate::body::SubjectBody { stature_m: rec.subject_stature_m, info: rec.subject_info };
+            render::body_truth::BodyTruth::new(&take, &sub)?
+        };
+        let m = project::write_ground_truth(&take, &cams, &take.strided(a.stride), dir, body.as_mut())?;
         eprintln!("wrote {} ({} frames × {} cameras)", dir.display(), m.frames, cams.len());
         rows.push(m);
     }

@@ -14,7 +14,8 @@ pub fn write(
 ) -> anyhow::Result<()> {
     let take = crate::render::Take::from_record(rec, file)?;
     let asset = crate::body::BodyAsset::shipped()?;
-    let (body, _) = crate::body::dress_subject(&take.model, &take.world_from_model, &asset, &take.scales, &sub)
+    let (body, _) = take
+        .dress(&asset, &sub, &crate::body::FitSettings::default())
         .context("binding the body mesh to the trial's model")?;
     let nq = take.model.nq();
     let states: Vec<Vec<f64>> = take

@@ -49,6 +49,36 @@ pub struct Motion {
     pub source: String,
     pub times: Vec<f64>,
     pub series: Vec<Series>,
+    /// Windows of frames no pose fits (a converted trial's `/smocap/unfittable`; none known for
+    /// other files).
+    pub unfittable: Vec<Window>,
+}
+
+/// A window of unfittable frames of a motion ([`crate::pipeline::running::unfittable`]).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Window {
+    /// First and last frame (0-based, inclusive) and their times on the motion's axis (s).
+    pub first: usize,
+    pub last: usize,
+    pub start_s: f64,
+    pub end_s: f64,
+    /// Markers with the largest errors, largest first.
+    pub markers: Vec<String>,
+    /// "data" (the markers moved) or "model" (it cannot reach them).
+    pub cause: String,
+}
+
+/// A window of `ours` in a comparison: how many matched frames it holds and whether the
+/// statistics include them.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WindowCompared {
+    #[serde(flatten)]
+    pub window: Window,
+    /// Frames of the window matched to a reference frame.
+    pub matched_frames: usize,
+    /// Whether the coordinates' statistics (RMSE, offset, …) leave these frames out
+    /// ([`CompareOptions::exclude_unfittable`]).
+    pub excluded: bool,
 }
 
 impl Motion {
@@ -70,11 +100,14 @@ pub struct CompareOptions {
     pub reference_shift_s: f64,
     /// Compare only these coordinates (all coordinates both motions have when empty).
     pub coordinates: Vec<String>,
+    /// Leave the frames of `ours`'s unfittable windows ([`Motion::unfittable`]) out of the statistics.
+    #[serde(default)]
+    pub exclude_unfittable: bool,
 }
 
 impl Default for CompareOptions {
     fn default() -> Self {
-        CompareOptions { tolerance_s: None, reference_shift_s: 0.0, coordinates: Vec::new() }
+        CompareOptions { tolerance_s: None, reference_shift_s: 0.0, coordinates: Vec::new(), exclude_unfittable: false }
     }
 }
 
@@ -118,6 +151,9 @@ pub struct Comparison {
     pub missing_in_reference: Vec<String>,
     /// Mean RMSE over the angles compared (deg).
     pub mean_angle_rmse: f64,
+    /// `ours`'s unfittable windows, with their matched frames, included in the statistics or not.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unfittable: Vec<WindowCompared>,
 }
 
 impl Comparison {
@@ -175,8 +211,9 @@ pub fn compare(ours: &Motion, reference: &Motion, opt: &CompareOptions) -> Resul
             1e-6
         }
     });
-    let matches = match_times(&ours.times, &ref_times, tol);
+    let mut matches = match_times(&ours.times, &ref_times, tol);
     let matched_frames = matches.iter().filter(|m| m.is_some()).count();
+    let unfittable = windows_compared(ours, &mut matches, opt.exclude_unfittable);
     let span = |t: &[f64]| match (t.first(), t.last()) {
         (Some(a), Some(b)) => format!("{a:.3}–{b:.3} s"),
         _ => "none".to_string(),
@@ -239,7 +276,29 @@ pub fn compare(ours: &Motion, reference: &Motion, opt: &CompareOptions) -> Resul
         missing_in_ours,
         missing_in_reference,
         mean_angle_rmse,
+        unfittable,
     })
+}
+
+/// `ours`'s unfittable windows with their matched frames (times within a window's span); with
+/// `exclude`, those frames' matches are dropped from `matches`.
+fn windows_compared(ours: &Motion, matches: &mut [Option<usize>], exclude: bool) -> Vec<WindowCompared> {
+    ours.unfittable
+        .iter()
+        .map(|w| {
+            let inside = |i: usize| ours.times[i] >= w.start_s && ours.times[i] <= w.end_s;
+            let mut matched_frames = 0;
+            for (i, m) in matches.iter_mut().enumerate() {
+                if m.is_some() && inside(i) {
+                    matched_frames += 1;
+                    if exclude {
+                        *m = None;
+                    }
+                }
+            }
+            WindowCompared { window: w.clone(), matched_frames, excluded: exclude }
+        })
+        .collect()
 }
 
 /// Statistics of `(ours, reference)` pairs; `None` when there are none.
@@ -295,6 +354,7 @@ mod tests {
                 .into_iter()
                 .map(|(n, v)| Series { name: n.into(), quantity: Quantity::Angle, values: v })
                 .collect(),
+            unfittable: Vec::new(),
         }
     }
 
@@ -344,6 +404,33 @@ mod tests {
         assert!(s.rmse < 1e-9, "{s:?}");
         // The frames of 0.1 s ..= 1.88 s that the 50 Hz reference also sampled.
         assert_eq!(c.matched_frames, 90);
+    }
+
+    #[test]
+    fn unfittable_windows_are_listed_and_left_out_on_request() {
+        let t: Vec<f64> = (0..100).map(|i| i as f64 * 0.01).collect();
+        let r = vec![0.0; 100];
+        // Ours is off by 30° in frames 40–49 only.
+        let o: Vec<f64> = (0..100).map(|i| if (40..50).contains(&i) { 30.0 } else { 0.0 }).collect();
+        let mut ours = motion("ours", t.clone(), vec![("knee", o)]);
+        ours.unfittable = vec![Window {
+            first: 40,
+            last: 49,
+            start_s: 0.40,
+            end_s: 0.49,
+            markers: vec!["RKNE".into()],
+            cause: "data".into(),
+        }];
+        let reference = motion("ref", t, vec![("knee", r)]);
+        let with = compare(&ours, &reference, &Default::default()).unwrap();
+        assert_eq!((with.unfittable[0].matched_frames, with.unfittable[0].excluded), (10, false));
+        assert!((with.get("knee").unwrap().offset - 3.0).abs() < 1e-9);
+        let opt = CompareOptions { exclude_unfittable: true, ..Default::default() };
+        let without = compare(&ours, &reference, &opt).unwrap();
+        assert_eq!((without.unfittable[0].matched_frames, without.unfittable[0].excluded), (10, true));
+        let k = without.get("knee").unwrap();
+        assert_eq!(k.frames, 90);
+        assert!(k.offset.abs() < 1e-12 && k.max_abs < 1e-12, "{k:?}");
     }
 
     #[test]

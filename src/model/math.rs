@@ -118,6 +118,16 @@ pub fn euler_angles(r: &Matrix3<f64>) -> (f64, f64, f64) {
     }
 }
 
+/// The angle equal to `a` modulo 2π in (−π, π].
+pub fn wrap_angle(a: f64) -> f64 {
+    let w = (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+    if w == -std::f64::consts::PI {
+        std::f64::consts::PI
+    } else {
+        w
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -164,15 +174,5 @@ mod tests {
             let back = Rotation3::from_euler_angles(r2, p2, y2);
             assert!((back.matrix() - m.matrix()).amax() < 1e-12);
         }
-    }
-}
-
-/// The angle equal to `a` modulo 2π in (−π, π].
-pub fn wrap_angle(a: f64) -> f64 {
-    let w = (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
-    if w == -std::f64::consts::PI {
-        std::f64::consts::PI
-    } else {
-        w
     }
 }

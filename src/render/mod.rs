@@ -7,6 +7,7 @@
 //! everything is placed in the Z-up `world` of the MCAP `/tf` tree (metres, seconds).
 
 pub mod backdrop;
+pub mod body_truth;
 pub mod coco;
 pub mod look;
 pub mod png_out;

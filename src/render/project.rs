@@ -15,9 +15,11 @@
 //!   `camera,frame,time_s,kind,name,x_m,y_m,z_m,u_px,v_px,depth_m,in_image` (world x y z);
 //! - `metrics.json`: [`Metrics`].
 
+use super::body_truth::BodyTruth;
 use super::rig::{Camera, Pixel};
 use super::take::Take;
 use super::{write_file, RenderError};
+use crate::body::keypoints::{NAMES as SURFACE_NAMES, SKELETON as SURFACE_SKELETON};
 use crate::kinematics::Workspace;
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
@@ -69,6 +71,12 @@ pub struct Metrics {
     pub marker_error_mm: Option<f64>,
     /// Observed markers counted.
     pub observed: usize,
+    /// Mean distance (mm) between the body's virtual markers and the model's markers (the
+    /// thesis' "marker spatial error"; [`crate::body::virtual_markers`]), over every skin marker
+    /// and projected frame; `None` without a body.
+    pub virtual_marker_error_mm: Option<f64>,
+    /// The same over landmark markers only.
+    pub virtual_landmark_error_mm: Option<f64>,
     pub cameras: Vec<CameraMetrics>,
 }
 
@@ -80,6 +88,9 @@ pub struct CameraMetrics {
     /// both inside the image; `None` when there are none.
     pub marker_error_px: Option<f64>,
     pub pairs: usize,
+    /// Mean distance (px) between the projections of the virtual and the model's markers (the
+    /// thesis' "marker pixel error"), over the pairs both inside the image; `None` without a body.
+    pub virtual_marker_error_px: Option<f64>,
 }
 
 fn matrix(m: &Matrix3<f64>) -> Value {
@@ -152,6 +163,7 @@ pub fn write_ground_truth(
     cameras: &[Camera],
     frames: &[usize],
     dir: &Path,
+    mut body: Option<&mut BodyTruth>,
 ) -> Result<Metrics, RenderError> {
     let model = &take.model;
     let names = keypoint_names(take);
@@ -174,6 +186,7 @@ pub fn write_ground_truth(
     .map_err(cv)?;
     let (mut err3, mut n3) = (0.0, 0usize);
     let mut errpx = vec![(0.0, 0usize); cameras.len()];
+    let mut virt = VirtualErrors::new(cameras.len());
     let mut ws = Workspace::new(model);
     for (k, &i) in frames.iter().enumerate() {
         let pose = take.pose(i, &mut ws);
@@ -183,11 +196,18 @@ pub fn write_ground_truth(
                 n3 += 1;
             }
         }
-        let points: Vec<(&str, &str, Vector3<f64>)> =
+        let mut points: Vec<(&str, &str, Vector3<f64>)> =
             (pose.markers.iter().enumerate().map(|(m, p)| ("marker", marker_names[m], *p)))
                 .chain(pose.joints.iter().enumerate().map(|(b, p)| ("joint", names[nm + b].as_str(), *p)))
                 .chain(pose.observed.iter().enumerate().filter_map(|(m, p)| Some(("observed", marker_names[m], (*p)?))))
                 .collect();
+        if let Some(b) = body.as_deref_mut() {
+            b.at(take, i);
+            virt.add_spatial(b, &pose.markers);
+            points.extend(b.surface.iter().zip(SURFACE_NAMES).map(|(p, n)| ("surface", n, Vector3::from(*p))));
+            let vm = &b.virtual_markers.markers;
+            points.extend(vm.iter().zip(&b.virtual_points).map(|(v, p)| ("virtual", marker_names[v.marker], *p)));
+        }
         for (c, cam) in cameras.iter().enumerate() {
             let image_id = k + 1;
             images[c].push(CocoImage {
@@ -209,10 +229,21 @@ pub fn write_ground_truth(
                     }
                 }
             }
-            for (cat, px) in [(1, &model_px), (2, &obs_px)] {
+            let body_px: Vec<Option<Pixel>> = match body.as_deref() {
+                Some(b) => {
+                    virt.add_pixels(c, cam, b, &pose.markers);
+                    b.surface.iter().map(|p| Some(cam.project(&Vector3::from(*p)))).collect()
+                }
+                None => Vec::new(),
+            };
+            for (cat, px) in [(1, &model_px), (2, &obs_px), (3, &body_px)] {
+                if cat == 3 && body.is_none() {
+                    continue;
+                }
                 let (kp, n, bbox) = coco_keypoints(px);
                 annotations[c].push(CocoAnnotation {
-                    id: 2 * k + cat,
+                    // the body's after every frame's model and observed annotations
+                    id: if cat == 3 { 2 * frames.len() + k + 1 } else { 2 * k + cat },
                     image_id,
                     category_id: cat,
                     keypoints: kp,
@@ -255,10 +286,18 @@ pub fn write_ground_truth(
                 "version": env!("CARGO_PKG_VERSION"),
             }),
             camera: camera_json(cam),
-            categories: json!([
-                { "id": 1, "name": "model", "supercategory": "person", "keypoints": names, "keypoint_kinds": kinds, "skeleton": skeleton },
-                { "id": 2, "name": "observed", "supercategory": "person", "keypoints": marker_names, "skeleton": [] },
-            ]),
+            categories: {
+                let mut cats = json!([
+                    { "id": 1, "name": "model", "supercategory": "person", "keypoints": names, "keypoint_kinds": kinds, "skeleton": skeleton },
+                    { "id": 2, "name": "observed", "supercategory": "person", "keypoints": marker_names, "skeleton": [] },
+                ]);
+                if body.is_some() {
+                    cats.as_array_mut().expect("an array").push(json!(
+                        { "id": 3, "name": "body", "supercategory": "person", "keypoints": SURFACE_NAMES, "skeleton": SURFACE_SKELETON }
+                    ));
+                }
+                cats
+            },
             images: std::mem::take(&mut images[c]),
             annotations: std::mem::take(&mut annotations[c]),
         };
@@ -273,18 +312,61 @@ pub fn write_ground_truth(
         frames: frames.len(),
         marker_error_mm: (n3 > 0).then(|| err3 / n3 as f64 * 1e3),
         observed: n3,
+        virtual_marker_error_mm: mean(virt.all).map(|e| e * 1e3),
+        virtual_landmark_error_mm: mean(virt.landmarks).map(|e| e * 1e3),
         cameras: cameras
             .iter()
             .zip(&errpx)
-            .map(|(c, &(s, n))| CameraMetrics {
+            .zip(&virt.px)
+            .map(|((c, &(s, n)), &v)| CameraMetrics {
                 camera: c.name.clone(),
                 marker_error_px: (n > 0).then(|| s / n as f64),
                 pairs: n,
+                virtual_marker_error_px: mean(v),
             })
             .collect(),
     };
     write_file(&dir.join("metrics.json"), &pretty(&serde_json::to_value(&metrics).expect("metrics serialise")))?;
     Ok(metrics)
+}
+
+/// `(sum, count)` to a mean; `None` when nothing was counted.
+fn mean((s, n): (f64, usize)) -> Option<f64> {
+    (n > 0).then(|| s / n as f64)
+}
+
+/// Sums of the virtual markers' distances to the model's markers: in space (m; all, and
+/// landmarks) and per camera in pixels (both inside the image).
+struct VirtualErrors {
+    all: (f64, usize),
+    landmarks: (f64, usize),
+    px: Vec<(f64, usize)>,
+}
+
+impl VirtualErrors {
+    fn new(cameras: usize) -> VirtualErrors {
+        VirtualErrors { all: (0.0, 0), landmarks: (0.0, 0), px: vec![(0.0, 0); cameras] }
+    }
+
+    fn add_spatial(&mut self, b: &BodyTruth, markers: &[Vector3<f64>]) {
+        for (v, p) in b.virtual_markers.markers.iter().zip(&b.virtual_points) {
+            let d = (p - markers[v.marker]).norm();
+            self.all = (self.all.0 + d, self.all.1 + 1);
+            if v.landmark {
+                self.landmarks = (self.landmarks.0 + d, self.landmarks.1 + 1);
+            }
+        }
+    }
+
+    fn add_pixels(&mut self, c: usize, cam: &Camera, b: &BodyTruth, markers: &[Vector3<f64>]) {
+        for (v, p) in b.virtual_markers.markers.iter().zip(&b.virtual_points) {
+            let (a, m) = (cam.project(p), cam.project(&markers[v.marker]));
+            if a.in_image && m.in_image {
+                let e = &mut self.px[c];
+                *e = (e.0 + ((a.u - m.u).powi(2) + (a.v - m.v).powi(2)).sqrt(), e.1 + 1);
+            }
+        }
+    }
 }
 
 /// Projects named `world` points (m) into `cameras`: `cameras.json` and `points.csv`
@@ -337,18 +419,31 @@ pub fn read_points(path: &Path) -> Result<Vec<(String, Vector3<f64>)>, RenderErr
 pub fn metrics_table(rows: &[Metrics]) -> String {
     let cams: Vec<String> =
         rows.first().map(|m| m.cameras.iter().map(|c| c.camera.clone()).collect()).unwrap_or_default();
+    let body = rows.iter().any(|m| m.virtual_marker_error_mm.is_some());
     let mut s = String::from("| trial | frames | 3D marker error (mm) |");
     for c in &cams {
         s += &format!(" {c} (px) |");
     }
+    if body {
+        s += " virtual markers (mm) |";
+        for c in &cams {
+            s += &format!(" virtual {c} (px) |");
+        }
+    }
     s += "\n|---|---:|---:|";
-    s += &"---:|".repeat(cams.len());
+    s += &"---:|".repeat(cams.len() + if body { 1 + cams.len() } else { 0 });
     s.push('\n');
     let f = |v: Option<f64>, d: usize| v.map_or("–".to_string(), |v| format!("{v:.d$}"));
     for m in rows {
         s += &format!("| {} | {} | {} |", m.trial, m.frames, f(m.marker_error_mm, 2));
         for c in &m.cameras {
             s += &format!(" {} |", f(c.marker_error_px, 2));
+        }
+        if body {
+            s += &format!(" {} |", f(m.virtual_marker_error_mm, 2));
+            for c in &m.cameras {
+                s += &format!(" {} |", f(c.virtual_marker_error_px, 2));
+            }
         }
         s.push('\n');
     }

@@ -48,7 +48,23 @@ pub struct Pose {
     pub observed: Vec<Option<Vector3<f64>>>,
 }
 
+/// Frames of a trial the body's skin is fitted at (beside the bind pose; [`Take::dress`]).
+pub const FIT_POSES: usize = 8;
+
 impl Take {
+    /// The subject's body on this take: shaped from `sub`, bound to the model, and fitted to the
+    /// model's markers at the bind pose and [`FIT_POSES`] of the take's frames
+    /// ([`crate::body::dress_subject_with`]); with a one-line summary.
+    pub fn dress(
+        &self,
+        asset: &crate::body::BodyAsset,
+        sub: &crate::body::SubjectBody,
+        fit: &crate::body::FitSettings,
+    ) -> Result<(crate::body::Dressed, String), crate::body::BindError> {
+        let poses = crate::body::fit_poses(&self.q, FIT_POSES);
+        crate::body::dress_subject_with(&self.model, &self.world_from_model, asset, &self.scales, sub, &poses, fit)
+    }
+
     /// The trial of a converted MCAP file: the attached scaled model (its coordinates by name,
     /// unit scales: the calibrated morphology is in the model) where the file has one that names
     /// every coordinate, else the conversion model ([`conversion_model`]) at the first frame's

@@ -20,10 +20,11 @@ pub struct Actor {
 }
 
 impl Actor {
-    /// Dresses `take`'s subject (`sub`: what its file says of it) with the shipped body; the
-    /// summary line of [`crate::body::dress_subject`] beside it.
+    /// Dresses `take`'s subject (`sub`: what its file says of it) with the shipped body, fitted
+    /// to its markers as `smocap export` fits it ([`Take::dress`], default settings); the
+    /// summary line beside it.
     pub fn dress(take: Take, asset: &BodyAsset, sub: &SubjectBody) -> Result<(Actor, String), crate::body::BindError> {
-        let (body, line) = crate::body::dress_subject(&take.model, &take.world_from_model, asset, &take.scales, sub)?;
+        let (body, line) = take.dress(asset, sub, &crate::body::FitSettings::default())?;
         Ok((Actor { take, body }, line))
     }
 }

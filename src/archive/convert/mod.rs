@@ -121,6 +121,9 @@ pub fn convert(
             (st, _) => format!("{st} ({} frames, {:.2} s)", t.frames, t.solve_s),
         };
         log(&format!("[{k}/{total}] {}/{}: {what}", t.dataset, t.trial));
+        for u in &t.unfittable {
+            log(&format!("  warning: {}/{}: {}", t.dataset, t.trial, u.why));
+        }
     };
     let run = || -> Vec<(Vec<TrialOutcome>, Option<SubjectCalibration>)> {
         groups.par_iter().map(|g| subject(&datasets[g.dataset], g, opt, &conflicts, &report, log)).collect()
@@ -171,6 +174,8 @@ fn outcome(
         rmse_mm: None,
         backend: None,
         label_qc: Vec::new(),
+        unfittable: Vec::new(),
+        reason: None,
     }
 }
 

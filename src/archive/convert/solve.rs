@@ -156,6 +156,8 @@ fn trial_outcome(
             rmse_mm: s.rmse_mm,
             backend: Some(backend.into()),
             label_qc: s.label_qc.clone(),
+            unfittable: s.unfittable.clone(),
+            reason: s.reason.clone(),
             ..outcome(d, g, t, out, if s.suspect.is_some() { "suspect" } else { "ok" }, s.suspect.clone())
         },
         Err(e) => failed(d, g, t, out, e),

@@ -32,6 +32,14 @@ pub struct TrialOutcome {
     /// ([`crate::pipeline::input::label_qc`]).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub label_qc: Vec<crate::pipeline::input::label_qc::LabelEvent>,
+    /// Runs of frames no pose fits, their markers and whether the data or the model is to blame
+    /// ([`crate::pipeline::running::unfittable`]; the file's `/smocap/unfittable`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unfittable: Vec<crate::pipeline::running::unfittable::Unfittable>,
+    /// What the verdict says beyond the status: "the data is bad here: …" for unfittable runs
+    /// blamed on the data (the trial is not `failed` for them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
 }
 
 /// A dataset's fate (skipped ones say why: its root is absent; failed ones too: a bad glob, a
@@ -143,7 +151,23 @@ impl ConvertSummary {
                 med(|t| t.rmse_mm),
             );
         }
-        s + &self.throughput()
+        s + &self.unfittable_line() + &self.throughput()
+    }
+
+    /// The runs of unfittable frames over the trials, when there are any: how many, in how many
+    /// trials, how many blamed on the data ("the data is bad here").
+    pub fn unfittable_line(&self) -> String {
+        let runs: Vec<_> = self.trials.iter().flat_map(|t| &t.unfittable).collect();
+        if runs.is_empty() {
+            return String::new();
+        }
+        let trials = self.trials.iter().filter(|t| !t.unfittable.is_empty()).count();
+        let data = runs.iter().filter(|u| u.cause == "data").count();
+        format!(
+            "unfittable frames: {} runs in {trials} trials ({data} blamed on the data, {} on the model): the trials' `unfittable` in the report\n",
+            runs.len(),
+            runs.len() - data
+        )
     }
 
     /// Where the time went: calibration per subject (by stage), end-to-end frames/s against the

@@ -6,7 +6,7 @@
 //! column is a translation when its name ends in `_tx`, `_ty` or `_tz` (OpenSim's naming), and
 //! rotations are converted from radians when the header says `inDegrees=no`.
 
-use super::{Motion, Quantity, Series};
+use super::{Motion, Quantity, Series, Window};
 use crate::io::markers::units_to_metres;
 use serde::Deserialize;
 use std::path::Path;
@@ -136,7 +136,7 @@ pub fn motion_from_table(t: &crate::io::sto::Table, file: &str) -> Result<Motion
             Series { name: name.clone(), quantity, values: t.rows.iter().map(|r| r[i] * k).collect() }
         })
         .collect();
-    Ok(Motion { source: file.into(), times: t.rows.iter().map(|r| r[time]).collect(), series })
+    Ok(Motion { source: file.into(), times: t.rows.iter().map(|r| r[time]).collect(), series, unfittable: Vec::new() })
 }
 
 /// The state channel of a converted trial (radians and metres by coordinate name).
@@ -155,8 +155,24 @@ fn motion_from_mcap(path: &Path) -> Result<Motion, LoadError> {
             Series { name: name.clone(), quantity, values }
         })
         .collect();
-    let times = rec.frames.iter().map(|f| f.state.time + rec.time_offset).collect();
-    Ok(Motion { source: path.display().to_string(), times, series })
+    let times: Vec<f64> = rec.frames.iter().map(|f| f.state.time + rec.time_offset).collect();
+    // A window's span: the times of its first and last frames on this axis.
+    let time_of =
+        |frame: u32| rec.frames.iter().position(|f| f.state.frame == frame as usize).map_or(f64::NAN, |i| times[i]);
+    let unfittable = rec
+        .unfittable
+        .iter()
+        .flat_map(|u| &u.runs)
+        .map(|r| Window {
+            first: r.first_frame as usize,
+            last: r.last_frame as usize,
+            start_s: time_of(r.first_frame),
+            end_s: time_of(r.last_frame),
+            markers: r.markers.clone(),
+            cause: r.cause.clone(),
+        })
+        .collect();
+    Ok(Motion { source: path.display().to_string(), times, series, unfittable })
 }
 
 /// The coordinates `map` reads from the angle points of `t` (a C3D file read as points: the
@@ -180,7 +196,7 @@ pub fn angles_from_markers(t: &crate::io::MarkerTrial, map: &AngleMap, file: &st
         wanted.dedup();
         return Err(LoadError::NoAngles { file: file.into(), wanted: wanted.join(", "), has: t.labels.join(", ") });
     }
-    Ok(Motion { source: file.into(), times: t.times.clone(), series })
+    Ok(Motion { source: file.into(), times: t.times.clone(), series, unfittable: Vec::new() })
 }
 
 #[cfg(test)]

@@ -58,22 +58,27 @@ pub fn max_jump(proxy: &ProxyMap, a: &[f64], b: &[f64]) -> (f64, Option<usize>) 
 /// Slowest joint speed (rad/s, 500°/s) a frame may reach before its jump is weighed, whatever the
 /// trial's own motion: the floor of [`JumpLimits::bound_rad`].
 pub const SPEED_FLOOR_RAD_S: f64 = 500.0 * std::f64::consts::PI / 180.0;
-/// How many times the trial's 99th percentile of frame-to-frame changes a frame may move.
-pub const TRIAL_JUMP_FACTOR: f64 = 2.0;
-/// A continued (bounded) pose is taken when its marker RMSE is at most this many times the
-/// free pose's: no pose fits such a frame, so the one continuing the motion is as good.
+/// How many times the trial's 99th percentile of frame-to-frame changes (between frames that fit)
+/// a frame of an unfittable run may move: once, as far as the trial's own frames move.
+pub const TRIAL_JUMP_FACTOR: f64 = 1.0;
+/// A run's continued (bounded) poses are taken when their RMS marker RMSE is at most this many
+/// times the free poses' (or its markers were displaced): no pose fits such frames, so the one
+/// continuing the motion is as good.
 pub const CONTINUED_FIT_RATIO: f64 = 1.5;
 
-/// What the continuity of unfittable frames ([`crate::pipeline::running::lanes::resolve_unfittable_jumps`])
+/// What the continuity of unfittable frames ([`crate::pipeline::running::jumps::resolve_unfittable_jumps`])
 /// allows a trial (`docs/KINEMATICS.md`, "Jumps in unfittable frames").
 #[derive(Clone, Debug)]
 pub struct JumpLimits {
     /// Per proxy, the largest change (rad) from the course of the motion a frame may take in a
-    /// rotational proxy: `max(TRIAL_JUMP_FACTOR × P99 of that proxy's frame-to-frame changes over
-    /// the trial, SPEED_FLOOR_RAD_S / rate)`; infinite for the others.
+    /// rotational proxy: `max(TRIAL_JUMP_FACTOR × P99 of that proxy's changes between neighbouring
+    /// frames that both fit (RMSE at most `unfittable_m`), SPEED_FLOOR_RAD_S / rate)`; infinite
+    /// for the others.
     pub bound_rad: Vec<f64>,
     /// A frame's marker RMSE above this (m) is unfittable ([`crate::pipeline::running::unfittable`]).
     pub unfittable_m: f64,
+    /// The trial's median frame RMSE (m).
+    pub median_m: f64,
 }
 
 impl JumpLimits {
@@ -83,8 +88,12 @@ impl JumpLimits {
         use crate::pipeline::running::unfittable::{RMSE_FACTOR, RMSE_FLOOR_MM};
         let mut rmse: Vec<f64> = frames.iter().flatten().map(|f| f.1).filter(|r| r.is_finite()).collect();
         let median = crate::solve::median(&mut rmse);
+        let unfittable_m = if median.is_finite() { (RMSE_FACTOR * median).max(RMSE_FLOOR_MM * 1e-3) } else { f64::NAN };
         let rate = if rate_hz.is_finite() && rate_hz > 0.0 { rate_hz } else { 100.0 };
         let floor = SPEED_FLOOR_RAD_S / rate;
+        // The trial's own motion is measured between frames that both fit: the jumps of the
+        // unfittable frames themselves would otherwise widen the bound that is to hold them.
+        let fits = |f: &(&[f64], f64)| f.1 <= unfittable_m;
         let mut steps = Vec::with_capacity(frames.len());
         let bound_rad = (0..proxy.np())
             .map(|k| {
@@ -93,7 +102,9 @@ impl JumpLimits {
                 }
                 steps.clear();
                 steps.extend(frames.windows(2).filter_map(|w| match (w[0], w[1]) {
-                    (Some(a), Some(b)) => Some(wrap_angle(b.0[k] - a.0[k]).abs()).filter(|d| d.is_finite()),
+                    (Some(a), Some(b)) if fits(&a) && fits(&b) => {
+                        Some(wrap_angle(b.0[k] - a.0[k]).abs()).filter(|d| d.is_finite())
+                    }
                     _ => None,
                 }));
                 steps.sort_by(f64::total_cmp);
@@ -102,21 +113,56 @@ impl JumpLimits {
                 (TRIAL_JUMP_FACTOR * p99).max(floor)
             })
             .collect();
-        JumpLimits {
-            bound_rad,
-            unfittable_m: if median.is_finite() { (RMSE_FACTOR * median).max(RMSE_FLOOR_MM * 1e-3) } else { f64::NAN },
+        JumpLimits { bound_rad, unfittable_m, median_m: median }
+    }
+
+    /// Where a frame of an unfittable run may go (rad): per rotational proxy, within `bound_rad`
+    /// of the `course` of the motion and within `bound_rad × n` of the last solved frame before it
+    /// as continued (`prev`, `n` frames earlier: one bounded step per frame); where the two
+    /// exclude each other (the course moves faster than that), between them. Writes the box's
+    /// centre to `mid` and its half-width to `half` (infinite for the other proxies).
+    pub fn reach(&self, course: &[f64], prev: Option<(&[f64], usize)>, mid: &mut [f64], half: &mut [f64]) {
+        for (k, b) in self.bound_rad.iter().enumerate() {
+            if !b.is_finite() {
+                (mid[k], half[k]) = (course[k], *b);
+                continue;
+            }
+            let (mut lo, mut hi) = (course[k] - b, course[k] + b);
+            if let Some((pose, n)) = prev {
+                // The neighbour's value in the course's turn (periodic proxies).
+                let c = course[k] + wrap_angle(pose[k] - course[k]);
+                (lo, hi) = (lo.max(c - b * n as f64), hi.min(c + b * n as f64));
+            }
+            if lo > hi {
+                (lo, hi) = (hi, lo);
+            }
+            (mid[k], half[k]) = (0.5 * (lo + hi), 0.5 * (hi - lo));
         }
     }
 
-    /// Whether `p` departs from `centre` by more than its bound in some rotational proxy.
-    pub fn departs(&self, centre: &[f64], p: &[f64]) -> bool {
-        self.bound_rad.iter().enumerate().any(|(k, b)| b.is_finite() && wrap_angle(p[k] - centre[k]).abs() > *b)
+    /// Whether `p` lies outside the box `mid ± half` ([`Self::reach`]) in some rotational proxy.
+    pub fn outside(mid: &[f64], half: &[f64], p: &[f64]) -> bool {
+        half.iter().enumerate().any(|(k, h)| h.is_finite() && wrap_angle(p[k] - mid[k]).abs() > *h)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_frame_of_an_unfittable_run_reaches_one_bounded_step_from_the_frame_before() {
+        let limits = JumpLimits { bound_rad: vec![0.1, f64::INFINITY], unfittable_m: 0.01, median_m: 0.003 };
+        let (mut mid, mut half) = (vec![0.0; 2], vec![0.0; 2]);
+        // Course at 0; the frame before at 0.15: [−0.1, 0.1] ∩ [0.05, 0.25] = [0.05, 0.1].
+        limits.reach(&[0.0, 3.0], Some((&[0.15, 9.0], 1)), &mut mid, &mut half);
+        assert!((mid[0] - 0.075).abs() < 1e-12 && (half[0] - 0.025).abs() < 1e-12, "{mid:?} {half:?}");
+        assert_eq!((mid[1], half[1]), (3.0, f64::INFINITY));
+        assert!(JumpLimits::outside(&mid, &half, &[0.0, 50.0]) && !JumpLimits::outside(&mid, &half, &[0.08, 50.0]));
+        // Two frames earlier: two steps. Further than the course allows: between the two.
+        limits.reach(&[0.0, 3.0], Some((&[0.5, 9.0], 2)), &mut mid, &mut half);
+        assert!((mid[0] - 0.2).abs() < 1e-12 && (half[0] - 0.1).abs() < 1e-12, "{mid:?} {half:?}");
+    }
 
     #[test]
     fn unwrapping_moves_by_whole_turns_toward_the_previous_frame() {

@@ -17,7 +17,7 @@
 use crate::io::MarkerTrial;
 use crate::kinematics::assembly::{fold_tracking_reference, Evaluator, FrameProblem};
 use crate::kinematics::backend::{BackendError, BatchBackend, EnergyEval, GnSink, GnView};
-use crate::pipeline::running::continuity::{max_jump, JumpLimits, CONTINUED_FIT_RATIO, FLIP_RAD};
+use crate::pipeline::running::continuity::{max_jump, FLIP_RAD};
 use crate::solve::init::multi_start_with;
 use crate::solve::presolve::outlier_threshold;
 use crate::solve::trqp::{FrameIteration, Next};
@@ -71,8 +71,8 @@ impl FrameObservations<'_> {
 /// One solved frame: proxies, statistics, seconds from its start to its end (wall).
 pub type FrameResult = (Vec<f64>, FrameStats, f64);
 
-struct Lane<'e> {
-    solver: FrameSolver<'e>,
+pub(crate) struct Lane<'e> {
+    pub(crate) solver: FrameSolver<'e>,
     /// The trial (index into the inputs) of the current segment.
     trial: usize,
     /// Current segment `[a, b)` and frame.
@@ -80,7 +80,7 @@ struct Lane<'e> {
     frame: usize,
     /// First frame of the segment handed on (frames before it are its run-in).
     emit_from: usize,
-    p: Vec<f64>,
+    pub(crate) p: Vec<f64>,
     prev: Option<Vec<f64>>,
     prev2: Option<Vec<f64>>,
     reference: Vec<f64>,
@@ -97,7 +97,7 @@ struct Lane<'e> {
 }
 
 impl<'e> Lane<'e> {
-    fn new(eval: &'e Evaluator<'e>, settings: &SolverSettings) -> Lane<'e> {
+    pub(crate) fn new(eval: &'e Evaluator<'e>, settings: &SolverSettings) -> Lane<'e> {
         let (np, ny) = (eval.proxy.np(), eval.model.ny());
         Lane {
             solver: FrameSolver::new(eval, settings.clone(), make_qp(settings.qp)),
@@ -132,7 +132,7 @@ impl<'e> Lane<'e> {
     /// Solves frame `f` again, alone, from `(prev, prev2)` (a warm start, or with `presolve` the
     /// frame's pre-solve), after `prepare` on the solver (bounds, say): the statistics and the
     /// time spent (s). The pose is left in `self.p`.
-    fn solve_again(
+    pub(crate) fn solve_again(
         &mut self,
         inp: &TrialInputs<'_>,
         f: usize,
@@ -410,73 +410,8 @@ pub fn resolve_flips(
     kept
 }
 
-/// Jumps in unfittable frames (`docs/KINEMATICS.md`, "Jumps in unfittable frames"): in a run of
-/// solved frames whose marker RMSE exceeds `limits.unfittable_m` (bridged frames inside it
-/// neither end nor break it), a frame whose pose departs from the course of the motion (the
-/// linear interpolation between the solved frames just before and after the run, or the one
-/// there is) by more than its `limits.bound_rad` in some rotational proxy is solved again from that
-/// course with every rotational proxy bounded to it ± its `limits.bound_rad`; the continued pose is
-/// kept when its RMSE is at most [`CONTINUED_FIT_RATIO`] times the free pose's. Fittable frames
-/// are never touched (a clean fast swing is followed). Deterministic, in frame order, on the CPU.
-pub fn resolve_unfittable_jumps(
-    eval: &Evaluator<'_>,
-    settings: &SolverSettings,
-    inp: &TrialInputs<'_>,
-    limits: &JumpLimits,
-    results: &mut [Option<FrameResult>],
-) -> Vec<usize> {
-    let mut kept = Vec::new();
-    let n = results.len();
-    let bad = |r: &Option<FrameResult>| solved(r).is_some_and(|r| r.1.rmse_m > limits.unfittable_m);
-    let mut lane: Option<Lane<'_>> = None;
-    let mut centre = vec![0.0; eval.proxy.np()];
-    let mut f = 0;
-    while f < n {
-        if !bad(&results[f]) {
-            f += 1;
-            continue;
-        }
-        let a = f;
-        while f < n && (bad(&results[f]) || solved(&results[f]).is_none()) {
-            f += 1;
-        }
-        let before = (0..a).rev().find(|&g| solved(&results[g]).is_some());
-        let after = (f..n).find(|&g| solved(&results[g]).is_some());
-        for g in a..f {
-            let Some((p, old, _)) = solved(&results[g]) else { continue };
-            let pose = |h: usize| &results[h].as_ref().expect("a solved frame").0;
-            match (before, after) {
-                (Some(x), Some(y)) => {
-                    let t = (g - x) as f64 / (y - x) as f64;
-                    for (k, c) in centre.iter_mut().enumerate() {
-                        *c = pose(x)[k] + t * (pose(y)[k] - pose(x)[k]);
-                    }
-                }
-                (Some(x), None) | (None, Some(x)) => centre.copy_from_slice(pose(x)),
-                (None, None) => break,
-            }
-            if !limits.departs(&centre, p) {
-                continue;
-            }
-            let old_rmse = old.rmse_m;
-            let lane = lane.get_or_insert_with(|| Lane::new(eval, settings));
-            let bound = |s: &mut FrameSolver<'_>| s.bound_rotations(&centre, &limits.bound_rad);
-            let (stats, spent) = lane.solve_again(inp, g, (centre.clone(), None), false, bound);
-            lane.solver.reset_ranges();
-            let r = results[g].as_mut().expect("a solved frame");
-            if stats.status != FrameStatus::TooFewMarkers && stats.rmse_m <= CONTINUED_FIT_RATIO * old_rmse {
-                *r = (lane.p.clone(), stats, r.2 + spent);
-                kept.push(g);
-            } else {
-                r.2 += spent;
-            }
-        }
-    }
-    kept
-}
-
 /// The result of a frame that was solved (not bridged).
-fn solved(r: &Option<FrameResult>) -> Option<&FrameResult> {
+pub(crate) fn solved(r: &Option<FrameResult>) -> Option<&FrameResult> {
     r.as_ref().filter(|r| r.1.status != FrameStatus::TooFewMarkers)
 }
 

@@ -19,8 +19,7 @@ use crate::pipeline::input::matching::MarkerMatch;
 use crate::pipeline::input::trial::{match_markers, no_match, GapRuns, SinkError, TrialError};
 use crate::pipeline::running::continuity::JumpLimits;
 use crate::pipeline::running::lanes::{
-    resolve_flips, resolve_outliers_above, resolve_unfittable_jumps, run_lanes_across, FrameObservations, FrameResult,
-    TrialInputs,
+    resolve_flips, resolve_outliers_above, run_lanes_across, FrameObservations, FrameResult, TrialInputs,
 };
 use crate::pipeline::running::order::Orderer;
 use crate::pipeline::running::sink::{FrameSink, SolvedFrame, Stop};
@@ -399,7 +398,13 @@ fn presolve_pass(
         let inputs = base.inputs(obs);
         let end = job.bounds[g1 - 1].1;
         let mut kept = resolve_outliers_above(eval, settings, &inputs, &rel, threshold, &mut job.held[w0..end]);
-        kept.extend(resolve_unfittable_jumps(eval, settings, &inputs, &limits, &mut job.held[w0..end]));
+        kept.extend(crate::pipeline::running::jumps::resolve_unfittable_jumps(
+            eval,
+            settings,
+            &inputs,
+            &limits,
+            &mut job.held[w0..end],
+        ));
         kept.extend(resolve_flips(eval, settings, &inputs, &mut job.held[w0..end]));
         kept.sort_unstable();
         kept.dedup();

@@ -98,6 +98,15 @@ pub fn reason(runs: &[Unfittable]) -> Option<String> {
     (!data.is_empty()).then(|| format!("the data is bad here: {} (markers moved; not a failed solve)", data.join(", ")))
 }
 
+/// Whether the misfit of a run with frame RMSEs `run` (m) appears or vanishes within one frame
+/// interval: at an edge with a directly neighbouring solved frame (its RMSE `before` or
+/// `after`), the RMSE steps by more than half the run's excess over the trial's `median`.
+pub fn misfit_steps(before: Option<f64>, run: &[f64], after: Option<f64>, median: f64) -> bool {
+    let (Some(first), Some(last)) = (run.first(), run.last()) else { return false };
+    let step = 0.5 * (run.iter().copied().fold(0.0, f64::max) - median);
+    before.is_some_and(|x| first - x > step) || after.is_some_and(|y| last - y > step)
+}
+
 /// The run of `fits[a..b]`.
 fn run(fits: &[FrameFit], a: usize, b: usize, median: f64, limit: f64, names: &[String]) -> Unfittable {
     let r = &fits[a..b];
@@ -112,13 +121,12 @@ fn run(fits: &[FrameFit], a: usize, b: usize, median: f64, limit: f64, names: &[
     markers.sort_by(|x, y| y.1.total_cmp(&x.1).then(x.0.cmp(&y.0)));
     markers.truncate(RUN_MARKERS);
     let rigid = r.iter().map(|f| f.rigid_move).filter(|v| v.is_finite()).fold(0.0, f64::max);
-    // The misfit steps in (or out) within one frame: at an edge with a neighbour, the RMSE
-    // changes by more than half the run's excess over the median.
-    let step = 0.5 * (peak - median);
-    let onset = a > 0 && fits[a].frame == fits[a - 1].frame + 1 && fits[a].rmse - fits[a - 1].rmse > step;
-    let offset = b < fits.len() && fits[b].frame == fits[b - 1].frame + 1 && fits[b - 1].rmse - fits[b].rmse > step;
+    let next = |k: usize, j: usize| (fits[j].frame == fits[k].frame + 1).then_some(fits[j].rmse);
+    let before = (a > 0).then(|| next(a - 1, a)).flatten().map(|_| fits[a - 1].rmse);
+    let after = (b < fits.len()).then(|| next(b - 1, b)).flatten();
+    let rmse: Vec<f64> = r.iter().map(|f| f.rmse).collect();
     let moved = rigid > RIGID_MOVE_MM * 1e-3;
-    let data = moved || onset || offset;
+    let data = moved || misfit_steps(before, &rmse, after, median);
     let (first, last) = (r[0].frame, r[r.len() - 1].frame);
     let list: Vec<String> = markers.iter().map(|&(m, d)| format!("{} {:.0} mm", names[m], 1e3 * d)).collect();
     let frames = if first == last { format!("frame {first}") } else { format!("frames {first}–{last}") };
