@@ -65,6 +65,18 @@ impl Phenotype {
             _ => return None,
         })
     }
+
+    fn set(&mut self, name: &str, v: f64) {
+        let field = match name {
+            "gender" => &mut self.gender,
+            "age" => &mut self.age,
+            "muscle" => &mut self.muscle,
+            "weight" => &mut self.weight,
+            "height" => &mut self.height,
+            _ => &mut self.proportions,
+        };
+        *field = v;
+    }
 }
 
 /// Skinning of one vertex: up to four body segments (indices into [`BodyAsset::segments`])
@@ -116,6 +128,8 @@ pub struct BodyAsset {
     pub reference_stature: f64,
     /// Points × 3, flattened (f64 of the stored f32).
     mean: Vec<f64>,
+    /// Vertices that may be the highest or the lowest of an adult shape ([`Self::stature_of`]).
+    extremes: Vec<usize>,
     /// rank × points × 3, flattened (f32 of the stored f16).
     components: Vec<f32>,
     rank: usize,
@@ -362,8 +376,10 @@ impl BodyAsset {
             factors,
             target_levels,
             age_adult: h.age_adult,
+            extremes: Vec::new(),
         };
         asset.rest = asset.shape_from(&Phenotype::default());
+        asset.extremes = asset.extreme_candidates();
         Ok(asset)
     }
 
@@ -466,10 +482,47 @@ impl BodyAsset {
         self.shape(&self.coeffs(p)).expect("coefficients of the basis' own rank")
     }
 
+    /// The 100 highest and 100 lowest vertices of the reference shape and of each shape with one
+    /// parameter at 0 or 1: where the top of the head and the soles are for any adult.
+    fn extreme_candidates(&self) -> Vec<usize> {
+        let mut shapes = vec![self.rest.clone()];
+        for name in ["gender", "age", "muscle", "weight", "height", "proportions"] {
+            for v in [0.0, 1.0] {
+                let mut p = Phenotype::default();
+                p.set(name, v);
+                shapes.push(self.shape_from(&p));
+            }
+        }
+        let mut out = Vec::new();
+        for s in &shapes {
+            let mut order: Vec<usize> = (0..s.vertices.len()).collect();
+            order.sort_by(|&a, &b| s.vertices[a].z.total_cmp(&s.vertices[b].z).then(a.cmp(&b)));
+            out.extend(&order[..100]);
+            out.extend(&order[order.len() - 100..]);
+        }
+        out.sort_unstable();
+        out.dedup();
+        out
+    }
+
+    /// The stature (m) of phenotype `p`'s shape, from the z of [`Self::extreme_candidates`] only.
+    pub fn stature_of(&self, p: &Phenotype) -> f64 {
+        let c = self.coeffs(p);
+        let n = self.mean.len();
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for &v in &self.extremes {
+            let i = 3 * v + 2;
+            let z =
+                self.mean[i] + c.iter().enumerate().map(|(k, ck)| ck * self.components[k * n + i] as f64).sum::<f64>();
+            (lo, hi) = (lo.min(z), hi.max(z));
+        }
+        hi - lo
+    }
+
     /// The phenotype `p` with `height` set so that the shape's stature is `stature` (m), found
     /// by bisection (stature grows with `height`); an error if `height` in [0, 1] cannot reach it.
     pub fn height_for_stature(&self, p: &Phenotype, stature: f64) -> Result<Phenotype, BodyError> {
-        let at = |h: f64| self.shape_from(&Phenotype { height: h, ..*p }).stature();
+        let at = |h: f64| self.stature_of(&Phenotype { height: h, ..*p });
         let (min, max) = (at(0.0), at(1.0));
         if !(min..=max).contains(&stature) {
             return Err(BodyError::StatureOutOfRange { target: stature, min, max });
@@ -542,6 +595,16 @@ mod tests {
             let sum: f32 = s.weights.iter().sum();
             assert!((sum - 1.0).abs() < 1e-6, "vertex {v}: {sum}");
             assert!(s.weights.windows(2).all(|w| w[0] >= w[1]), "vertex {v}: sorted");
+        }
+    }
+
+    #[test]
+    fn the_stature_from_the_extreme_vertices_is_the_shapes() {
+        let a = BodyAsset::shipped().unwrap();
+        for (i, h) in [0.0, 0.3, 0.7, 1.0].into_iter().enumerate() {
+            let p =
+                Phenotype { height: h, weight: 0.25 * i as f64, gender: 1.0 - 0.3 * i as f64, ..Default::default() };
+            assert!((a.stature_of(&p) - a.shape_from(&p).stature()).abs() < 1e-9, "{h}");
         }
     }
 

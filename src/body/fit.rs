@@ -74,7 +74,7 @@ impl Default for FitSettings {
             landmark_sd_m: 0.005,
             other_sd_m: 0.01,
             stature_sd_m: 0.002,
-            volume_sd: 0.01,
+            volume_sd: 0.005,
             joint_depth_m: 0.01,
             joint_sd_m: 0.002,
             shape_sd: 0.5,
@@ -104,6 +104,10 @@ pub struct ShapeFit {
     pub volume_error_after: Option<f64>,
     pub markers_used: usize,
 }
+
+/// How far (m) the fit can move a skin point at most, with margin: the shift and the stretch's
+/// [`FitSettings::shift_max_m`] each, twice the shape coefficients' reach, and a triangle's size.
+const REACH: f64 = 0.12;
 
 /// One residual's dependence on posed vertices: `(vertex, d r / d x_vertex)`.
 type Row = Vec<(usize, Vector3<f64>)>;
@@ -279,7 +283,9 @@ struct Fit<'a> {
     p: Problem<'a>,
     states: Vec<State>,
     triangles: &'a [[u32; 3]],
-    index: SkinIndex,
+    /// Per state, per point (the skin markers, then the joints): the triangles near enough to
+    /// hold its nearest skin point at any parameters ([`Fit::narrow`]).
+    near: Vec<Vec<Vec<u32>>>,
     /// `(marker, its body, landmark?)` of the skin markers.
     markers: Vec<(usize, usize, bool)>,
     joints: Vec<usize>,
@@ -303,17 +309,17 @@ impl Fit<'_> {
     fn residuals(&self, si: usize, posed: &[[f32; 3]], landmarks: &mut Vec<f64>, e: &mut Eval) -> Vec<(f64, Row, f64)> {
         let (st, set) = (&self.states[si], self.settings);
         let mut res = Vec::new();
-        let on_skin =
-            |p: Vector3<f64>, body: usize| nearest_on_skin(posed, self.triangles, &self.index.per_body[body], p);
+        let near = &self.near[si];
+        let on_skin = |p: Vector3<f64>, slot: usize| nearest_on_skin(posed, self.triangles, &near[slot], p);
         let row_of = |n: &super::skin_distance::Nearest| -> Row {
             n.vertices.iter().zip(&n.weights).map(|(&v, &w)| (v as usize, -n.normal * w)).collect()
         };
-        for &(k, body, landmark) in &self.markers {
+        for (slot, &(k, _, landmark)) in self.markers.iter().enumerate() {
             let x = st.markers[k];
             if !x.iter().all(|c| c.is_finite()) {
                 continue;
             }
-            let near = on_skin(x, body);
+            let near = on_skin(x, slot);
             let off = near.distance - set.marker_radius_m;
             if landmark {
                 landmarks.push(off.abs());
@@ -322,12 +328,14 @@ impl Fit<'_> {
                 res.push((off, row_of(&near), set.other_sd_m));
             }
         }
-        // the joint centres stay inside the skin, by `joint_depth_m` at least; a deep joint's
-        // nearest triangle may face away, so "outside" is confirmed by the winding number
-        for &b in &self.joints {
-            let (x, near) = (st.joints[b], on_skin(st.joints[b], b));
-            let outside =
-                near.distance > 0.0 && super::metrics::winding_number(posed, self.triangles, [x.x, x.y, x.z]) < 0.5;
+        // the joint centres stay inside the skin, by `joint_depth_m` at least; a joint's nearest
+        // triangle may face away, so "outside" is confirmed by the winding number
+        for (j, &b) in self.joints.iter().enumerate() {
+            let (x, near) = (st.joints[b], on_skin(st.joints[b], self.markers.len() + j));
+            // (a joint "outside" by more than 3 cm is a deep one whose nearest triangle faces away)
+            let outside = near.distance > 0.0
+                && near.distance < 0.03
+                && super::metrics::winding_number(posed, self.triangles, [x.x, x.y, x.z]) < 0.5;
             let depth = if outside { -near.distance } else { near.distance.abs() };
             if depth < set.joint_depth_m {
                 res.push((set.joint_depth_m - depth, row_of(&near), set.joint_sd_m));
@@ -351,9 +359,45 @@ impl Fit<'_> {
         res
     }
 
+    /// Per state and point, the triangles of the point's body ([`SkinIndex`]) with a vertex
+    /// within [`REACH`] of the farthest the nearest skin point can be: its distance before the
+    /// fit plus what the fit can move the skin.
+    fn narrow(&self, index: &SkinIndex) -> Vec<Vec<Vec<u32>>> {
+        let bodies: Vec<usize> = self.markers.iter().map(|m| m.1).chain(self.joints.iter().copied()).collect();
+        self.states
+            .iter()
+            .map(|st| {
+                let posed: Vec<[f32; 3]> = st.posed.iter().map(|v| [v.x as f32, v.y as f32, v.z as f32]).collect();
+                let points =
+                    self.markers.iter().map(|m| st.markers[m.0]).chain(self.joints.iter().map(|&b| st.joints[b]));
+                points
+                    .zip(&bodies)
+                    .map(|(x, &b)| {
+                        let all = &index.per_body[b];
+                        if !x.iter().all(|c| c.is_finite()) {
+                            return Vec::new();
+                        }
+                        let reach = nearest_on_skin(&posed, self.triangles, all, x).distance.abs() + REACH;
+                        let within = |t: &u32| {
+                            self.triangles[*t as usize].iter().any(|&v| (st.posed[v as usize] - x).norm() < reach)
+                        };
+                        all.iter().copied().filter(within).collect()
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
     /// The cost (Huber on the residuals over σ, plus the priors) at `theta` and its normal equations.
-    fn evaluate(&self, theta: &[f64], sd: &[f64], dv: &mut [Vector3<f64>], posed: &mut [[f32; 3]]) -> Eval {
-        let n = self.p.params();
+    fn evaluate(
+        &self,
+        theta: &[f64],
+        sd: &[f64],
+        dv: &mut [Vector3<f64>],
+        posed: &mut [[f32; 3]],
+        normal: bool,
+    ) -> Eval {
+        let n = if normal { self.p.params() } else { 0 };
         let mut e = Eval {
             cost: 0.0,
             h: DMatrix::zeros(n, n),
@@ -363,7 +407,7 @@ impl Fit<'_> {
             volume_error: None,
         };
         self.p.displacement(theta, dv);
-        let (mut landmarks, mut row) = (Vec::new(), vec![0.0; n]);
+        let (mut landmarks, mut row) = (Vec::new(), vec![0.0; self.p.params()]);
         for (si, st) in self.states.iter().enumerate() {
             for (o, ((x0, m), d)) in posed.iter_mut().zip(st.posed.iter().zip(&st.to_posed).zip(dv.iter())) {
                 let x = x0 + m * d;
@@ -372,6 +416,9 @@ impl Fit<'_> {
             for (value, r, sigma) in self.residuals(si, posed, &mut landmarks, &mut e) {
                 let (z, k) = (value / sigma, self.settings.huber_m / sigma);
                 e.cost += if z.abs() <= k { 0.5 * z * z } else { k * z.abs() - 0.5 * k * k };
+                if !normal {
+                    continue;
+                }
                 // iteratively reweighted: the Huber weight on the squared residual
                 let w = (if z.abs() > k { k / z.abs() } else { 1.0 }).sqrt() / sigma;
                 self.p.jacobian_row(&r, &st.to_posed, w, &mut row);
@@ -380,10 +427,12 @@ impl Fit<'_> {
                 e.g.axpy(value * w, &j, 1.0);
             }
         }
-        for k in 0..n {
-            e.cost += 0.5 * (theta[k] / sd[k]).powi(2);
-            e.h[(k, k)] += 1.0 / sd[k].powi(2);
-            e.g[k] += theta[k] / sd[k].powi(2);
+        for (k, (t, s)) in theta.iter().zip(sd).enumerate() {
+            e.cost += 0.5 * (t / s).powi(2);
+            if normal {
+                e.h[(k, k)] += 1.0 / s.powi(2);
+                e.g[k] += t / s.powi(2);
+            }
         }
         e.landmark_median = super::skin_distance::quantiles(landmarks).0;
         e
@@ -414,11 +463,11 @@ pub fn fit_to_markers(
         y.extend_from_slice(scales);
         states.push(state(model, body, &y, &mut ws));
     }
-    let fit = Fit {
+    let mut fit = Fit {
         p: problem(model, body, asset),
         states,
         triangles: &body.triangles,
-        index: SkinIndex::new(model, body),
+        near: Vec::new(),
         markers: (0..model.markers.len())
             .filter(|&k| kinds[k] != MarkerKind::Computed)
             .map(|k| (k, model.markers[k].body, kinds[k] == MarkerKind::Landmark))
@@ -428,11 +477,12 @@ pub fn fit_to_markers(
         volume_m3,
         settings,
     };
+    fit.near = fit.narrow(&SkinIndex::new(model, body));
     let sd = prior_sd(&fit.p, settings);
     let nv = fit.p.rest.len();
     let (mut dv, mut posed) = (vec![Vector3::zeros(); nv], vec![[0.0f32; 3]; nv]);
     let mut theta = vec![0.0; fit.p.params()];
-    let mut e = fit.evaluate(&theta, &sd, &mut dv, &mut posed);
+    let mut e = fit.evaluate(&theta, &sd, &mut dv, &mut posed, true);
     let mut out = ShapeFit {
         markers_used: fit.markers.len(),
         landmark_median_before_m: e.landmark_median,
@@ -447,16 +497,16 @@ pub fn fit_to_markers(
         let accepted = loop {
             let mut cand: Vec<f64> = theta.iter().zip(step.iter()).map(|(a, s)| a - t * s).collect();
             fit.p.clamp(&mut cand, settings);
-            let ec = fit.evaluate(&cand, &sd, &mut dv, &mut posed);
-            if ec.cost < e.cost {
-                break Some((cand, ec));
+            if fit.evaluate(&cand, &sd, &mut dv, &mut posed, false).cost < e.cost {
+                break Some(cand);
             }
             if t < 0.1 {
                 break None;
             }
             t *= 0.5;
         };
-        let Some((cand, ec)) = accepted else { break };
+        let Some(cand) = accepted else { break };
+        let ec = fit.evaluate(&cand, &sd, &mut dv, &mut posed, true);
         let converged = e.cost - ec.cost < 1e-6 * e.cost.max(1.0);
         (theta, e) = (cand, ec);
         if converged {

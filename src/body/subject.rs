@@ -102,38 +102,11 @@ pub fn dress_subject_with(
     poses: &[&[f64]],
     fit: &FitSettings,
 ) -> Result<(Dressed, String), BindError> {
-    let mut p = phenotype_for_subject(asset, sub);
+    let p = phenotype_for_subject(asset, sub);
     let mut body = Dressed::new(model, world_from_model, asset, scales, sub.stature(), p)?;
     let mut mass = posed_mass(model, &body, scales);
-    // The subject's scales stretch the shape: with the mass known, `weight` is corrected on
-    // the posed body's mass (secant steps from the shape's mass slope; at most two).
-    if let Some(m) = sub.info.mass_kg.filter(|_| scales.len() == 3 * model.nb()) {
-        let lo = shape_mass(asset, &Phenotype { weight: 0.0, ..body.phenotype });
-        let hi = shape_mass(asset, &Phenotype { weight: 1.0, ..body.phenotype });
-        let mut slope = (hi - lo).max(1.0) * mass / shape_mass(asset, &body.phenotype).max(1.0);
-        let mut prev = (p.weight, mass);
-        for _ in 0..2 {
-            if (mass - m).abs() < 0.01 * m {
-                break;
-            }
-            let w = (p.weight + (m - mass) / slope).clamp(0.0, 1.0);
-            if (w - p.weight).abs() < 1e-4 {
-                break;
-            }
-            let q = Phenotype { weight: w, ..p };
-            let b = Dressed::new(model, world_from_model, asset, scales, sub.stature(), q)?;
-            let bm = posed_mass(model, &b, scales);
-            if (bm - prev.1).abs() > 1e-6 && (w - prev.0).abs() > 1e-6 {
-                slope = ((bm - prev.1) / (w - prev.0)).max(1.0);
-            }
-            prev = (w, bm);
-            if (bm - m).abs() < (mass - m).abs() {
-                (p, body, mass) = (q, b, bm);
-            } else {
-                break;
-            }
-        }
-    }
+    // the subject's scales stretch the shape, so its mass is off the phenotype's; the fit below
+    // matches the volume to the mass itself
     if scales.len() == 3 * model.nb() {
         let stature = sub.stature().unwrap_or(body.target_stature);
         let volume = sub.info.mass_kg.map(|m| m / BODY_DENSITY);
