@@ -46,6 +46,7 @@ from ._smocap import (
     convert,
     read_markers,
     read_trial,
+    render,
 )
 
 __all__ = [
@@ -66,4 +67,5 @@ __all__ = [
     "convert",
     "read_markers",
     "read_trial",
+    "render",
 ]

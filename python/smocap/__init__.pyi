@@ -2,7 +2,7 @@
 
 import os
 import pathlib
-from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple, Union, final
+from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple, Union, final
 
 import numpy as np
 import numpy.typing as npt
@@ -290,6 +290,26 @@ class Trial:
         ``(vertices, faces)``, vertices float32 (frames, V, 3) in the Z-up world (m), faces
         uint32 (F, 3), counter-clockwise seen from outside."""
     def __len__(self) -> int: ...
+
+def render(
+    trial: _PathLike,
+    cameras: Optional[_PathLike] = None,
+    size: Optional[Tuple[int, int]] = None,
+    frames: Optional[Sequence[int]] = None,
+    seed: int = 0,
+) -> Dict[str, Any]:
+    """Draws a converted trial's subject through a camera rig as ``smocap render`` does (wgpu;
+    lavapipe without a GPU), into memory: no file is written. ``cameras`` is a rig file (default:
+    the built-in rig, perturbed by ``seed``), ``size`` ``(width, height)`` in pixels for every
+    camera (default: each camera's own), ``frames`` trial frame numbers (default: all; the arrays
+    hold every frame asked for, so mind the memory).
+
+    Returns a dict: per camera name a dict of ``rgb`` (frames × h × w × 3, uint8), ``mask``
+    (frames × h × w, uint16; 0 background, ``1 + body`` the model's bodies), ``depth``
+    (frames × h × w, float32, metres along the camera axis, 0 where no body), ``keypoints``
+    (frames × k × 3: x, y, COCO visibility), ``keypoint_depths_m`` (frames × k) and ``camera``
+    (``K``, ``R``, ``t``… as ``cameras.json``); ``frames`` (the trial frame numbers),
+    ``keypoint_names`` and ``keypoint_kinds``. Raises :class:`SmocapError`."""
 
 def convert(
     config: _PathLike,

@@ -10,6 +10,7 @@ mod errors;
 mod markers;
 mod model;
 mod motion;
+mod render;
 mod subject;
 
 use pyo3::prelude::*;
@@ -28,6 +29,7 @@ fn _smocap(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(subject::calibrate, m)?)?;
     m.add_function(wrap_pyfunction!(archive::read_trial, m)?)?;
     m.add_function(wrap_pyfunction!(convert::convert, m)?)?;
+    m.add_function(wrap_pyfunction!(render::render, m)?)?;
     Ok(())
 }
 

@@ -20,6 +20,7 @@ mod markers;
 mod merge;
 mod preview;
 mod project;
+mod render;
 mod skin_report;
 mod solve;
 mod synth;
@@ -77,6 +78,8 @@ pub enum Command {
     Export(export::ExportArgs),
     /// 2D/3D ground truth of converted trials from a camera rig: COCO keypoint JSON, CSV, camera matrices, marker metrics.
     Project(project::ProjectArgs),
+    /// The solved people drawn through a camera rig: RGB, segment masks, depth and COCO keypoints with visibility, per camera and frame.
+    Render(Box<render::RenderArgs>),
     /// A contact sheet (PNG) of a converted trial's projected skeleton and markers, one panel per camera.
     Preview(preview::PreviewArgs),
     /// Joint angles of a solved trial (`.mot`, `.mcap`) against a reference motion (OpenSim/AddBiomechanics `.mot`, Plug-in Gait angles in a C3D): RMSE, offset, waveform, correlation per coordinate.
@@ -105,6 +108,7 @@ pub fn main() -> ExitCode {
         Command::MergeReports(a) => merge::run(a),
         Command::Export(a) => export::run(a),
         Command::Project(a) => project::run(a),
+        Command::Render(a) => render::run(*a),
         Command::Preview(a) => preview::run(a),
         Command::EvalSpine(a) => eval_spine::run_cli(a),
         Command::EvalPresolve(a) => eval_presolve::run(a),

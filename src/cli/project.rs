@@ -90,7 +90,7 @@ pub fn run(a: ProjectArgs) -> anyhow::Result<u8> {
 }
 
 /// The deepest folder holding every file of `files` (their parents' common prefix).
-fn common_folder(files: &[PathBuf]) -> PathBuf {
+pub(super) fn common_folder(files: &[PathBuf]) -> PathBuf {
     let parents: Vec<Vec<std::path::Component>> =
         files.iter().map(|f| f.parent().map(|p| p.components().collect()).unwrap_or_default()).collect();
     let Some(first) = parents.first() else { return PathBuf::new() };

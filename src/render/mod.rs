@@ -6,12 +6,20 @@
 //! Input is a [`take::Take`]: a converted MCAP file read back, or a trial `solve` just solved;
 //! everything is placed in the Z-up `world` of the MCAP `/tf` tree (metres, seconds).
 
+pub mod backdrop;
 pub mod body_truth;
+pub mod coco;
+pub mod look;
+pub mod png_out;
 pub mod preview;
 pub mod project;
+pub mod raster;
 pub mod rig;
 pub mod scene;
 pub mod take;
+pub mod video;
+pub mod video_out;
+pub mod visibility;
 
 pub use rig::{Camera, SubjectFrame};
 pub use take::{Pose, Take};
@@ -31,6 +39,12 @@ pub enum RenderError {
     Gltf(#[from] crate::io::gltf::GltfError),
     #[error("{file}: {what}")]
     Image { file: String, what: String },
+    #[error(transparent)]
+    Raster(#[from] raster::RasterError),
+    #[error("binding the body mesh to the trial's model: {0}")]
+    Bind(#[from] crate::body::BindError),
+    #[error(transparent)]
+    Body(#[from] crate::body::BodyError),
 }
 
 /// The subject frame of a take (for default rigs and rigs in subject coordinates): from its
