@@ -48,13 +48,14 @@ fn every_shader_validates_with_naga_for_random_and_shipped_models() {
         let p = ProxyMap::new(&m, &Profile::default_for(&m)).unwrap();
         models.push((m, p));
     }
-    // Every shader in shaders/ is one the backend compiles.
+    // Every shader in shaders/ is one the backend compiles, or the rasterizer's (validated by
+    // src/render/raster/layout.rs against its host-side layout).
     let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/shaders");
     for entry in std::fs::read_dir(dir).unwrap() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "wgsl") {
             let text = std::fs::read_to_string(&path).unwrap();
-            let wired = [COMMON, COOPERATIVE, PER_FRAME, REAL_F32, REAL_F64];
+            let wired = [COMMON, COOPERATIVE, PER_FRAME, REAL_F32, REAL_F64, smocap::render::raster::layout::SHADER];
             assert!(wired.contains(&text.as_str()), "{} is not wired in", path.display());
         }
     }
