@@ -7,7 +7,7 @@
 # upload, device wait, read-back mapping, unpack, host CPU time per frame), and whole-solve
 # frames/s of a 100k-frame synthetic trial on both backends on the same machine. wgpu runs the
 # cooperative kernel (the default, one workgroup per frame) and, for comparison at 10k/100k, the
-# per-frame kernel. Worst case (every timeout) 4 min 50 s.
+# per-frame kernel, then smocap render at 1280x720. Worst case (every timeout) 5 min 50 s.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 BIN=${BIN:-target/release/smocap}
@@ -31,4 +31,11 @@ mkdir -p "$OUTDIR"
     timeout 50 "$BIN" demo --frames 100000 --backend "$b" --lanes 1000 2>&1 | tail -5 \
       || echo "demo $b failed: $?"
   done
+  # smocap render (issue 30): RGB + mask + depth + keypoints of the synthetic walk, 1280x720, the
+  # default rig's two cameras; frames/s in render.json's timings and on stderr
+  echo "# render: synthetic walk01, 1280x720, default rig"
+  timeout 20 "$BIN" convert datasets.toml --dataset synthetic --quiet --out "$OUTDIR/convert" >/dev/null 2>&1 \
+    && timeout 40 "$BIN" render "$OUTDIR/convert/synthetic/subj01/walk01.mcap" --size 1280x720 --quiet \
+      --out "$OUTDIR/render" 2>&1 | tail -3 || echo "render failed: $?"
+  [ -f "$OUTDIR/render/render.json" ] && head -c 1500 "$OUTDIR/render/render.json"
 } 2>&1 | tee "$OUTDIR/gpu-bench.txt"
