@@ -23,6 +23,11 @@ impl Trial {
         self.rec.frames.iter().map(|f| f.state.time + self.rec.time_offset).collect()
     }
 
+    /// A frame's time as in `q`'s index (None when that frame was not written).
+    fn time_of(&self, frame: u32) -> Option<f64> {
+        self.rec.frames.iter().find(|f| f.state.frame == frame as usize).map(|f| f.state.time + self.rec.time_offset)
+    }
+
     /// Coordinate names: the subject's order, else (files of the JSON encoding) by name.
     fn coordinate_names(&self) -> Vec<String> {
         match &self.rec.subject {
@@ -162,14 +167,7 @@ impl Trial {
         d.set_item("masked_frames", qc.masked_frames)?;
         d.set_item("masked_share", qc.masked_share)?;
         d.set_item("suspect", (!qc.suspect.is_empty()).then_some(&qc.suspect))?;
-        // A frame's time as in `q`'s index (None when that frame was not written).
-        let secs = |frame: u32| {
-            self.rec
-                .frames
-                .iter()
-                .find(|f| f.state.frame == frame as usize)
-                .map(|f| f.state.time + self.rec.time_offset)
-        };
+        let secs = |frame: u32| self.time_of(frame);
         let events = qc
             .events
             .iter()
@@ -198,13 +196,7 @@ impl Trial {
     /// `marker_error_mm`, `rigid_move_mm`, `cause` ("data" or "model") and `why`.
     #[getter]
     fn unfittable<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
-        let secs = |frame: u32| {
-            self.rec
-                .frames
-                .iter()
-                .find(|f| f.state.frame == frame as usize)
-                .map(|f| f.state.time + self.rec.time_offset)
-        };
+        let secs = |frame: u32| self.time_of(frame);
         let runs = self.rec.unfittable.iter().flat_map(|u| &u.runs);
         runs.map(|r| {
             let d = PyDict::new(py);

@@ -132,25 +132,28 @@ impl Problem<'_> {
         }
     }
 
+    /// Vertex `i`'s segment terms: per skinning segment, the index of its first parameter, the
+    /// weight, the segment's axes and the vertex in them about the segment's centroid.
+    fn segment_terms(&self, i: usize) -> impl Iterator<Item = (usize, f64, &Matrix3<f64>, Vector3<f64>)> + '_ {
+        let sk = &self.skin[i];
+        sk.segments.iter().zip(&sk.weights).filter(|(_, &w)| w != 0.0).map(move |(&s, &w)| {
+            let (s, r) = (s as usize, &self.axes[s as usize]);
+            (self.rank + 6 * s, w as f64, r, r.transpose() * (self.rest[i] - self.centre[s]))
+        })
+    }
+
     /// `Δv_i` of every vertex at parameters `theta`.
     fn displacement(&self, theta: &[f64], out: &mut [Vector3<f64>]) {
         for (i, o) in out.iter_mut().enumerate() {
             let mut d = Vector3::zeros();
             for (k, b) in self.basis.iter().enumerate() {
                 if theta[k] != 0.0 {
-                    d += theta[k] * Vector3::new(b[3 * i] as f64, b[3 * i + 1] as f64, b[3 * i + 2] as f64);
+                    d += theta[k] * basis_at(b, i);
                 }
             }
-            let sk = &self.skin[i];
-            for (&s, &w) in sk.segments.iter().zip(&sk.weights) {
-                if w == 0.0 {
-                    continue;
-                }
-                let (s, at) = (s as usize, self.rank + 6 * s as usize);
-                let r = &self.axes[s];
-                let local = r.transpose() * (self.rest[i] - self.centre[s]);
+            for (at, w, r, local) in self.segment_terms(i) {
                 let stretched = Vector3::new(theta[at] * local.x, theta[at + 1] * local.y, theta[at + 2] * local.z);
-                d += w as f64 * (r * stretched + Vector3::new(theta[at + 3], theta[at + 4], theta[at + 5]));
+                d += w * (r * stretched + Vector3::new(theta[at + 3], theta[at + 4], theta[at + 5]));
             }
             *o = d;
         }
@@ -163,17 +166,10 @@ impl Problem<'_> {
         for &(i, g) in row {
             let h = to_posed[i].transpose() * g * weight;
             for (k, b) in self.basis.iter().enumerate() {
-                out[k] += h.dot(&Vector3::new(b[3 * i] as f64, b[3 * i + 1] as f64, b[3 * i + 2] as f64));
+                out[k] += h.dot(&basis_at(b, i));
             }
-            let sk = &self.skin[i];
-            for (&s, &w) in sk.segments.iter().zip(&sk.weights) {
-                if w == 0.0 {
-                    continue;
-                }
-                let (s, at) = (s as usize, self.rank + 6 * s as usize);
-                let r = &self.axes[s];
-                let local = r.transpose() * (self.rest[i] - self.centre[s]);
-                let hw = h * w as f64;
+            for (at, w, r, local) in self.segment_terms(i) {
+                let hw = h * w;
                 for j in 0..3 {
                     out[at + j] += hw.dot(&r.column(j)) * local[j];
                     out[at + 3 + j] += hw[j];
@@ -220,6 +216,11 @@ fn state(model: &Model, body: &Dressed, y: &[f64], ws: &mut PoseWorkspace) -> St
         markers: (0..model.markers.len()).map(|k| r0 * Vector3::from_fn(|r, _| ws.kin.markers[3 * k + r])).collect(),
         joints: ws.kin.body_pos.iter().map(|p| r0 * p).collect(),
     }
+}
+
+/// Vertex `i`'s displacement in a basis component (flattened `x, y, z` per point).
+fn basis_at(b: &[f32], i: usize) -> Vector3<f64> {
+    Vector3::new(b[3 * i] as f64, b[3 * i + 1] as f64, b[3 * i + 2] as f64)
 }
 
 /// The problem's fixed parts: bind-pose vertices, segment frames and centroids, the basis.

@@ -55,18 +55,23 @@ fn rank(t: wgpu::DeviceType) -> u8 {
     }
 }
 
-/// Every adapter wgpu finds, best first (no device is created).
-pub fn list_adapters() -> Vec<AdapterSummary> {
+/// Every adapter wgpu finds on every backend, best first ([`rank`]); no device is created.
+/// Shared by the solver's backend and the rasterizer.
+pub fn adapters_best_first() -> Vec<wgpu::Adapter> {
     let mut a = pollster::block_on(instance().enumerate_adapters(wgpu::Backends::all()));
     a.sort_by_key(|a| rank(a.get_info().device_type));
-    a.iter().map(|a| AdapterSummary::of(&a.get_info())).collect()
+    a
+}
+
+/// Every adapter wgpu finds, best first (no device is created).
+pub fn list_adapters() -> Vec<AdapterSummary> {
+    adapters_best_first().iter().map(|a| AdapterSummary::of(&a.get_info())).collect()
 }
 
 /// The best adapter (for f64: the best offering `SHADER_F64`), or an error naming what was
 /// searched.
 pub(super) fn best_adapter(precision: Precision) -> Result<wgpu::Adapter, BackendError> {
-    let mut a = pollster::block_on(instance().enumerate_adapters(wgpu::Backends::all()));
-    a.sort_by_key(|a| rank(a.get_info().device_type));
+    let a = adapters_best_first();
     if precision == Precision::F64 && !a.is_empty() {
         let names: Vec<String> = a.iter().map(|a| a.get_info().name).collect();
         return a.into_iter().find(|a| a.features().contains(wgpu::Features::SHADER_F64)).ok_or_else(|| {

@@ -19,7 +19,7 @@ mod shader;
 mod words;
 
 use adapter::best_adapter;
-pub use adapter::{list_adapters, searched_backends, AdapterSummary};
+pub use adapter::{adapters_best_first, list_adapters, searched_backends, AdapterSummary};
 pub use shader::{shader_source, Kernel, Precision, COMMON, COOPERATIVE, PER_FRAME, REAL_F32, REAL_F64, WORKGROUP};
 
 use super::assembly::{Evaluator, FrameProblem};

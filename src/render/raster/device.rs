@@ -11,24 +11,10 @@ pub struct Gpu {
     pub adapter: String,
 }
 
-/// Preference order: discrete, integrated, virtual, other, CPU.
-fn rank(t: wgpu::DeviceType) -> u8 {
-    match t {
-        wgpu::DeviceType::DiscreteGpu => 0,
-        wgpu::DeviceType::IntegratedGpu => 1,
-        wgpu::DeviceType::VirtualGpu => 2,
-        wgpu::DeviceType::Other => 3,
-        wgpu::DeviceType::Cpu => 4,
-    }
-}
-
 impl Gpu {
     /// The best adapter's device; [`RasterError::NoAdapter`] when wgpu finds none.
     pub fn new() -> Result<Gpu, RasterError> {
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        let mut adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
-        adapters.sort_by_key(|a| rank(a.get_info().device_type));
-        let adapter = adapters.into_iter().next().ok_or_else(|| {
+        let adapter = crate::kinematics::gpu::adapters_best_first().into_iter().next().ok_or_else(|| {
             RasterError::NoAdapter(format!(
                 "wgpu found no adapter (for Vulkan on Linux: a GPU driver, or lavapipe from mesa-vulkan-drivers, \
                  and libvulkan1; VK_ICD_FILENAMES={})",
