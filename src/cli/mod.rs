@@ -21,6 +21,7 @@ mod merge;
 mod preview;
 mod project;
 mod render;
+mod retarget;
 mod skin_report;
 mod solve;
 mod synth;
@@ -80,6 +81,8 @@ pub enum Command {
     Project(project::ProjectArgs),
     /// The solved people drawn through a camera rig: RGB, segment masks, depth and COCO keypoints with visibility, per camera and frame.
     Render(Box<render::RenderArgs>),
+    /// Converted trials onto a humanoid robot (Unitree G1 shipped): GMR pickle, mjlab CSV, NPZ and a quality report per trial.
+    Retarget(retarget::RetargetArgs),
     /// A contact sheet (PNG) of a converted trial's projected skeleton and markers, one panel per camera.
     Preview(preview::PreviewArgs),
     /// Joint angles of a solved trial (`.mot`, `.mcap`) against a reference motion (OpenSim/AddBiomechanics `.mot`, Plug-in Gait angles in a C3D): RMSE, offset, waveform, correlation per coordinate.
@@ -109,6 +112,7 @@ pub fn main() -> ExitCode {
         Command::Export(a) => export::run(a),
         Command::Project(a) => project::run(a),
         Command::Render(a) => render::run(*a),
+        Command::Retarget(a) => retarget::run(a),
         Command::Preview(a) => preview::run(a),
         Command::EvalSpine(a) => eval_spine::run_cli(a),
         Command::EvalPresolve(a) => eval_presolve::run(a),

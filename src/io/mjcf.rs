@@ -37,7 +37,9 @@
 //!   set to match. Without `joint2`, `a` is locked at `a_ref + c0`. Fewer than five coefficients
 //!   keep the MuJoCo defaults (`0 1 0 0 0`) for the rest. Other equality kinds and inactive ones
 //!   are ignored with a warning.
-//! - Ignored silently: `geom`, `inertial`, `camera`, `light`, `plugin`, and all top-level sections
+//! - `geom`: not part of the [`Model`]; [`parse_mjcf_document`] collects the colliding spheres and
+//!   capsules (`geoms.rs`) and the `<contact><exclude>` pairs, for robots.
+//! - Ignored silently: `inertial`, `camera`, `light`, `plugin`, and all top-level sections
 //!   other than `compiler`, `default`, `worldbody`, `equality`. Unknown elements inside bodies are
 //!   ignored with a warning. Kinematics-changing elements we do not support (`include`, `frame`,
 //!   `composite`, `flexcomp`, `replicate`, `attach`) are errors.
@@ -46,6 +48,9 @@
 //! Warnings are plain strings `file:line: <element>: message`.
 
 mod attrs;
+mod geoms;
+
+pub use geoms::{Geom, GeomShape};
 
 use crate::model::{
     Body, Coordinate, CoordinateCoupling, CoordinateKind, Function, Joint, Marker, Model, ModelError, Motion,
@@ -94,6 +99,30 @@ pub fn parse_mjcf(text: &str, file_name: &str) -> Result<Model, MjcfError> {
 
 /// Like [`parse_mjcf`], also returning the warnings about ignored content.
 pub fn parse_mjcf_with_warnings(text: &str, file_name: &str) -> Result<(Model, Vec<String>), MjcfError> {
+    parse_mjcf_document(text, file_name).map(|d| (d.model, d.warnings))
+}
+
+/// What an MJCF file says beyond the kinematic [`Model`]: its colliding geoms and the body
+/// pairs its `<contact><exclude>` elements take out of collision.
+#[derive(Clone, Debug)]
+pub struct MjcfDocument {
+    pub model: Model,
+    /// Colliding geoms (`contype` or `conaffinity` non-zero), in document order.
+    pub geoms: Vec<Geom>,
+    /// `<contact><exclude body1 body2>` pairs, by body name.
+    pub excludes: Vec<(String, String)>,
+    pub warnings: Vec<String>,
+}
+
+/// Reads an MJCF file into an [`MjcfDocument`].
+pub fn read_mjcf_document(path: &Path) -> Result<MjcfDocument, MjcfError> {
+    let file = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|source| MjcfError::Io { file: file.clone(), source })?;
+    parse_mjcf_document(&text, &file)
+}
+
+/// Parses MJCF text into the model, its colliding geoms and contact exclusions.
+pub fn parse_mjcf_document(text: &str, file_name: &str) -> Result<MjcfDocument, MjcfError> {
     let doc = Document::parse(text).map_err(|e| {
         let p = e.pos();
         MjcfError::Xml { file: file_name.to_string(), line: p.row, column: p.col, message: e.to_string() }
@@ -124,9 +153,16 @@ pub fn parse_mjcf_with_warnings(text: &str, file_name: &str) -> Result<(Model, V
     let name = root.attribute("model").unwrap_or(stem);
     let file = b.ctx.file.to_string();
     let warnings = std::mem::take(&mut b.ctx.warnings);
+    let excludes = root
+        .children()
+        .filter(|n| n.has_tag_name("contact"))
+        .flat_map(|c| c.children().filter(|n| n.has_tag_name("exclude")))
+        .filter_map(|e| Some((e.attribute("body1")?.to_string(), e.attribute("body2")?.to_string())))
+        .collect();
+    let geoms = std::mem::take(&mut b.geoms);
     let model = Model::new(name, b.bodies, b.motions, b.coordinates, b.markers, b.couplings)
         .map_err(|source| MjcfError::Model { file, source })?;
-    Ok((model, warnings))
+    Ok(MjcfDocument { model, geoms, excludes, warnings })
 }
 
 /// One MJCF joint, resolved against its defaults.
@@ -166,13 +202,14 @@ struct Builder<'a> {
     /// Named joints: `Some` for hinge/slide, `None` for ball/free.
     joints: HashMap<String, Option<ScalarJoint>>,
     names: HashSet<(&'static str, String)>,
+    geoms: Vec<Geom>,
 }
 
 impl<'a> Builder<'a> {
     fn new(ctx: Ctx<'a>) -> Builder<'a> {
         let (bodies, motions, coordinates, markers, couplings) = Default::default();
-        let (body_nodes, joints, names) = Default::default();
-        Builder { ctx, bodies, motions, coordinates, markers, couplings, body_nodes, joints, names }
+        let (body_nodes, joints, names, geoms) = Default::default();
+        Builder { ctx, bodies, motions, coordinates, markers, couplings, body_nodes, joints, names, geoms }
     }
 
     /// Visits every element under one `worldbody` in document order.
@@ -258,6 +295,9 @@ impl<'a> Builder<'a> {
 
         for site in node.children().filter(|n| n.has_tag_name("site")) {
             self.site(site, class, index)?;
+        }
+        for (i, g) in node.children().filter(|n| n.has_tag_name("geom")).enumerate() {
+            self.geom(g, class, index, i)?;
         }
         Ok(())
     }

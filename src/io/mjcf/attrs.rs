@@ -36,6 +36,7 @@ impl<'a> Attrs<'a> {
 pub(super) struct Class<'a> {
     pub joint: Attrs<'a>,
     pub site: Attrs<'a>,
+    pub geom: Attrs<'a>,
 }
 
 /// Parsing context: document, compiler settings, default classes, warnings.
@@ -135,6 +136,7 @@ impl<'a> Ctx<'a> {
                     match c.tag_name().name() {
                         "joint" => class.joint.overlay(c),
                         "site" => class.site.overlay(c),
+                        "geom" => class.geom.overlay(c),
                         _ => {}
                     }
                 }

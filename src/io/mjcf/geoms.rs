@@ -1,0 +1,96 @@
+//! Collision geoms of an MJCF body: spheres and capsules (what robot self-collision and ground
+//! contact use), resolved against their `<default>` classes.
+//!
+//! A geom collides when `contype` or `conaffinity` is non-zero (MuJoCo's defaults are 1).
+//! Capsules come from `fromto` or from `pos`/orientation with half-length `size[1]` along the
+//! geom's z; a sphere from `pos` and `size[0]`. Colliding geoms of other types are kept as
+//! [`GeomShape::Other`] so that callers can say what they ignore.
+
+use super::{attrs::Attrs, Builder, MjcfError};
+use nalgebra::Vector3;
+
+/// A geom's shape in its body's frame (m).
+#[derive(Clone, Debug, PartialEq)]
+pub enum GeomShape {
+    Sphere {
+        centre: Vector3<f64>,
+        radius: f64,
+    },
+    /// The points within `radius` of the segment `a`–`b`.
+    Capsule {
+        a: Vector3<f64>,
+        b: Vector3<f64>,
+        radius: f64,
+    },
+    /// A colliding geom of a type not modelled here (`mesh`, `box`, …): its type.
+    Other(String),
+}
+
+/// One colliding geom.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Geom {
+    /// The geom's name, or `<body>_geom<i>` (`i` counts the body's geoms from 0).
+    pub name: String,
+    /// Model body index.
+    pub body: usize,
+    pub shape: GeomShape,
+    pub contype: u32,
+    pub conaffinity: u32,
+}
+
+impl<'a> Builder<'a> {
+    /// Appends `node` (the `i`-th geom of `body`) to the geoms when it collides.
+    pub(super) fn geom(
+        &mut self,
+        node: roxmltree::Node<'a, 'a>,
+        class: &'a str,
+        body: usize,
+        i: usize,
+    ) -> Result<(), MjcfError> {
+        let a = self.ctx.resolve(node, class, |c| &c.geom)?;
+        let int = |key: &str| -> Result<u32, MjcfError> {
+            match a.get(key) {
+                None => Ok(1),
+                Some((pos, v)) => v
+                    .trim()
+                    .parse()
+                    .map_err(|_| self.ctx.err_at(pos, "geom", format!("{key} '{v}': expected an integer"))),
+            }
+        };
+        let (contype, conaffinity) = (int("contype")?, int("conaffinity")?);
+        if contype == 0 && conaffinity == 0 {
+            return Ok(());
+        }
+        let name = node.attribute("name").map_or_else(|| format!("{}_geom{i}", self.bodies[body].name), str::to_string);
+        let shape = self.geom_shape(node, &a)?;
+        self.geoms.push(Geom { name, body, shape, contype, conaffinity });
+        Ok(())
+    }
+
+    fn geom_shape(&self, node: roxmltree::Node<'a, 'a>, a: &Attrs<'a>) -> Result<GeomShape, MjcfError> {
+        let kind = a.get("type").map_or("sphere", |v| v.1);
+        let size = a.get("size").and_then(|(_, v)| super::attrs::parse_numbers(v)).unwrap_or_default();
+        let radius = size.first().copied().unwrap_or(0.0);
+        let bad = |what: &str| self.ctx.err_at(a.pos("size", node), "geom", format!("{kind}: {what}"));
+        if !(radius > 0.0) && matches!(kind, "sphere" | "capsule") {
+            return Err(bad("needs size[0] > 0 (the radius)"));
+        }
+        let pos = self.ctx.vec3(node, a, "pos")?.unwrap_or_default();
+        match kind {
+            "sphere" => Ok(GeomShape::Sphere { centre: pos, radius }),
+            "capsule" => match self.ctx.nums::<6>(node, a, "fromto")? {
+                Some(f) => Ok(GeomShape::Capsule {
+                    a: Vector3::new(f[0], f[1], f[2]),
+                    b: Vector3::new(f[3], f[4], f[5]),
+                    radius,
+                }),
+                None => {
+                    let half = *size.get(1).ok_or_else(|| bad("needs size[1] (the half-length) without fromto"))?;
+                    let axis = self.ctx.orientation(node, a)? * Vector3::z();
+                    Ok(GeomShape::Capsule { a: pos - axis * half, b: pos + axis * half, radius })
+                }
+            },
+            other => Ok(GeomShape::Other(other.to_string())),
+        }
+    }
+}

@@ -1,0 +1,356 @@
+//! The per-frame retargeting QP over the robot's coordinates `q` (root pose, hinge joints).
+//!
+//! Each Gauss–Newton iteration minimises, over the step `Δ`,
+//! `Σ_tasks w_p |J_p Δ − e_p|² + w_r |J_ω Δ − e_r|²` (position errors `e_p` in m, orientation
+//! errors `e_r = log(R_target R_bodyᵀ)` in rad, world frame)
+//! `+ Σ_planted feet w_c (|J_p Δ − e_p|² + |J_ω Δ − e_r|²)` (the foot pinned where it landed, flat)
+//! `+ Σ_active w_g (J_z Δ − (m_g − z))²` (sole points below the ground margin `m_g`)
+//! `+ Σ_active w_s (nᵀ(J_a − J_b) Δ − (m_s − d))²` (capsule pairs closer than `m_s`)
+//! `+ w_t |q + Δ − q_prev|² + w_0 |q + Δ − q_ref|²_joints + μ |Δ|²`,
+//! subject to the **hard** box `max(lo, q_prev − v dt) ≤ q + Δ ≤ min(hi, q_prev + v dt)` (joint
+//! ranges and velocity limits) with the project's box QP. After the last iteration a sole still
+//! below the ground lifts the root by that much (a pure translation: joints untouched).
+//! Derivation and weights: `docs/RETARGET.md`.
+
+use super::collide::capsule_distance;
+use super::robot::Robot;
+use super::targets::{Plan, Targets};
+use crate::kinematics::cpu::{self, Workspace};
+use crate::solve::qp::{BoxQp, QpProblem, QpSolver};
+use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Weights (per m² or rad²), margins (m) and iteration counts of the retargeting solve.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct SolveSettings {
+    /// `w_t`: temporal smoothness, towards the previous frame.
+    pub smoothness: f64,
+    /// `w_0`: towards the mapping's reference posture (joints only).
+    pub posture: f64,
+    /// `μ`: Levenberg damping on the step.
+    pub damping: f64,
+    /// `w_c`: a planted foot's pin (position and orientation).
+    pub contact: f64,
+    /// `w_g` and `m_g`: sole points kept above the ground.
+    pub ground: f64,
+    pub ground_margin: f64,
+    /// `w_s` and `m_s`: capsule pairs kept apart.
+    pub collision: f64,
+    pub collision_margin: f64,
+    /// Gauss–Newton iterations per frame, and for the first frame.
+    pub iterations: usize,
+    pub first_iterations: usize,
+    /// Stop iterating once `max |Δ|` is below this (rad or m).
+    pub tolerance: f64,
+}
+
+impl Default for SolveSettings {
+    fn default() -> Self {
+        SolveSettings {
+            smoothness: 2e-3,
+            posture: 1e-4,
+            damping: 1e-6,
+            contact: 20.0,
+            ground: 100.0,
+            ground_margin: 0.001,
+            collision: 100.0,
+            collision_margin: 0.01,
+            iterations: 4,
+            first_iterations: 40,
+            tolerance: 1e-5,
+        }
+    }
+}
+
+/// A planted foot's pin: where its body is held (world, m) and its flat orientation.
+#[derive(Clone, Copy, Debug)]
+pub struct Pin {
+    pub pos: Vector3<f64>,
+    pub rot: Matrix3<f64>,
+}
+
+/// Per-thread scratch of the solve; nothing is allocated per frame once built.
+pub struct Solver<'a> {
+    robot: &'a Robot,
+    plan: &'a Plan,
+    pub settings: SolveSettings,
+    pub ws: Workspace,
+    y: Vec<f64>,
+    h: DMatrix<f64>,
+    g: DVector<f64>,
+    lb: DVector<f64>,
+    ub: DVector<f64>,
+    dx: DVector<f64>,
+    qp: BoxQp,
+    /// Point Jacobian scratch: columns touched, and per column the position / angular parts.
+    cols: Vec<usize>,
+    touched: Vec<bool>,
+    jp: Vec<Vector3<f64>>,
+    jr: Vec<Vector3<f64>>,
+    /// Capsule ends in world (m), refreshed each iteration.
+    ends: Vec<(Vector3<f64>, Vector3<f64>)>,
+}
+
+impl<'a> Solver<'a> {
+    pub fn new(robot: &'a Robot, plan: &'a Plan, settings: SolveSettings) -> Solver<'a> {
+        let n = robot.model.nq();
+        Solver {
+            robot,
+            plan,
+            settings,
+            ws: Workspace::new(&robot.model),
+            y: Vec::with_capacity(robot.model.ny()),
+            h: DMatrix::zeros(n, n),
+            g: DVector::zeros(n),
+            lb: DVector::zeros(n),
+            ub: DVector::zeros(n),
+            dx: DVector::zeros(n),
+            qp: BoxQp::with_capacity(n),
+            cols: Vec::with_capacity(n),
+            touched: vec![false; n],
+            jp: vec![Vector3::zeros(); n],
+            jr: vec![Vector3::zeros(); n],
+            ends: vec![(Vector3::zeros(), Vector3::zeros()); robot.capsules.len()],
+        }
+    }
+
+    pub fn robot(&self) -> &'a Robot {
+        self.robot
+    }
+    pub fn plan(&self) -> &'a Plan {
+        self.plan
+    }
+    /// Capsule ends in world (m) at the last [`Solver::forward`].
+    pub fn ends(&self) -> &[(Vector3<f64>, Vector3<f64>)] {
+        &self.ends
+    }
+
+    /// Forward kinematics of `q` into `self.ws`, and the capsules' world ends.
+    pub fn forward(&mut self, q: &[f64]) {
+        self.robot.state(q, &mut self.y);
+        cpu::forward(&self.robot.model, &self.y, &mut self.ws);
+        for (c, e) in self.robot.capsules.iter().zip(self.ends.iter_mut()) {
+            let (r, p) = (&self.ws.body_rot[c.body], &self.ws.body_pos[c.body]);
+            *e = (p + r * c.a, p + r * c.b);
+        }
+    }
+
+    /// Solves frame `i` in place in `q` (warm start on entry). `prev`: the previous frame's
+    /// solution and the time step (s); `pins`: per foot. Returns the iterations used.
+    pub fn frame(
+        &mut self,
+        t: &Targets,
+        i: usize,
+        q: &mut [f64],
+        prev: Option<(&[f64], f64)>,
+        pins: &[Option<Pin>],
+    ) -> usize {
+        let iterations = if prev.is_some() { self.settings.iterations } else { self.settings.first_iterations };
+        let mut used = 0;
+        for _ in 0..iterations {
+            used += 1;
+            self.forward(q);
+            self.assemble(t, i, q, prev, pins);
+            self.dx.fill(0.0);
+            let problem = QpProblem { h: &self.h, g: &self.g, lb: &self.lb, ub: &self.ub };
+            if self.qp.solve(&problem, &mut self.dx).is_err() {
+                break;
+            }
+            for (qj, d) in q.iter_mut().zip(self.dx.iter()) {
+                *qj += d;
+            }
+            if self.dx.amax() < self.settings.tolerance {
+                break;
+            }
+        }
+        self.forward(q);
+        let lift = self.lowest_sole().min(0.0);
+        if lift < 0.0 {
+            q[2] -= lift;
+            self.forward(q);
+        }
+        used
+    }
+
+    /// Lowest point of any planted-capable foot's capsules above the ground (m).
+    pub fn lowest_sole(&self) -> f64 {
+        let feet = &self.plan.feet;
+        self.robot
+            .capsules
+            .iter()
+            .zip(&self.ends)
+            .filter(|(c, _)| feet.iter().any(|f| f.robot_body == c.body))
+            .map(|(c, (a, b))| a.z.min(b.z) - c.radius)
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    fn assemble(&mut self, t: &Targets, i: usize, q: &[f64], prev: Option<(&[f64], f64)>, pins: &[Option<Pin>]) {
+        self.h.fill(0.0);
+        self.g.fill(0.0);
+        for k in 0..self.plan.tasks.len() {
+            let task = &self.plan.tasks[k];
+            let (b, wp, wr) = (task.robot_body, task.w_pos, task.w_rot);
+            let x = self.ws.body_pos[b];
+            self.point_jacobian(b, &x);
+            if wp > 0.0 {
+                self.add_position(wp, &(t.pos[i][k] - x));
+            }
+            if wr > 0.0 {
+                self.add_rotation(wr, &rot_error(&t.rot[i][k], &self.ws.body_rot[b]));
+            }
+        }
+        for (f, pin) in self.plan.feet.iter().zip(pins) {
+            if let Some(pin) = pin {
+                let x = self.ws.body_pos[f.robot_body];
+                self.point_jacobian(f.robot_body, &x);
+                let w = self.settings.contact;
+                self.add_position(w, &(pin.pos - x));
+                self.add_rotation(w, &rot_error(&pin.rot, &self.ws.body_rot[f.robot_body]));
+            }
+        }
+        self.add_ground();
+        self.add_collisions();
+        self.add_diagonal(q, prev);
+    }
+
+    /// Fills `cols`, `jp`, `jr` with the Jacobian of world point `x` fixed on body `b`.
+    fn point_jacobian(&mut self, b: usize, x: &Vector3<f64>) {
+        for &c in &self.cols {
+            self.touched[c] = false;
+        }
+        self.cols.clear();
+        let nq = self.robot.model.nq();
+        let (cols, touched, jp, jr) = (&mut self.cols, &mut self.touched, &mut self.jp, &mut self.jr);
+        cpu::chain_contributions(&self.robot.model, &self.ws, b, |j, a, w| {
+            if j >= nq {
+                return;
+            }
+            if !touched[j] {
+                touched[j] = true;
+                cols.push(j);
+                jp[j] = Vector3::zeros();
+                jr[j] = Vector3::zeros();
+            }
+            jp[j] += a + w.cross(x);
+            jr[j] += w;
+        });
+    }
+
+    /// `w |J_p Δ − e|²` with the Jacobian in `jp`.
+    fn add_position(&mut self, w: f64, e: &Vector3<f64>) {
+        for (ia, &a) in self.cols.iter().enumerate() {
+            self.g[a] -= w * self.jp[a].dot(e);
+            for &b in &self.cols[ia..] {
+                let v = w * self.jp[a].dot(&self.jp[b]);
+                self.h[(a, b)] += v;
+                if a != b {
+                    self.h[(b, a)] += v;
+                }
+            }
+        }
+    }
+
+    /// `w |J_ω Δ − e|²` with the Jacobian in `jr`.
+    fn add_rotation(&mut self, w: f64, e: &Vector3<f64>) {
+        for (ia, &a) in self.cols.iter().enumerate() {
+            self.g[a] -= w * self.jr[a].dot(e);
+            for &b in &self.cols[ia..] {
+                let v = w * self.jr[a].dot(&self.jr[b]);
+                self.h[(a, b)] += v;
+                if a != b {
+                    self.h[(b, a)] += v;
+                }
+            }
+        }
+    }
+
+    /// `w (Σ_j v_j Δ_j − e)²` for the row `v_j = n · jp[j]` over `cols`.
+    fn add_row(&mut self, w: f64, n: &Vector3<f64>, e: f64) {
+        for (ia, &a) in self.cols.iter().enumerate() {
+            let va = n.dot(&self.jp[a]);
+            self.g[a] -= w * va * e;
+            for &b in &self.cols[ia..] {
+                let v = w * va * n.dot(&self.jp[b]);
+                self.h[(a, b)] += v;
+                if a != b {
+                    self.h[(b, a)] += v;
+                }
+            }
+        }
+    }
+
+    /// Rows lifting foot capsule ends that are below the ground margin.
+    fn add_ground(&mut self) {
+        let (m, w) = (self.settings.ground_margin, self.settings.ground);
+        for k in 0..self.robot.capsules.len() {
+            let c = &self.robot.capsules[k];
+            if !self.plan.feet.iter().any(|f| f.robot_body == c.body) {
+                continue;
+            }
+            let (body, r) = (c.body, c.radius);
+            for end in [self.ends[k].0, self.ends[k].1] {
+                let gap = end.z - r;
+                if gap < m {
+                    self.point_jacobian(body, &end);
+                    self.add_row(w, &Vector3::z(), m - gap);
+                }
+            }
+        }
+    }
+
+    /// Rows pushing apart capsule pairs closer than the collision margin: the closest points'
+    /// relative motion along their normal, `nᵀ(J_a − J_b) Δ ≥ m_s − d`.
+    fn add_collisions(&mut self) {
+        let (m, w) = (self.settings.collision_margin, self.settings.collision);
+        for p in 0..self.robot.pairs.len() {
+            let (i, j) = self.robot.pairs[p];
+            let (ci, cj) = (&self.robot.capsules[i], &self.robot.capsules[j]);
+            let (ei, ej) = (self.ends[i], self.ends[j]);
+            let reach = 0.5 * ((ei.1 - ei.0).norm() + (ej.1 - ej.0).norm()) + ci.radius + cj.radius + m;
+            if (0.5 * (ei.0 + ei.1 - ej.0 - ej.1)).norm() > reach {
+                continue;
+            }
+            let (d, pa, pb) = capsule_distance((&ei.0, &ei.1, ci.radius), (&ej.0, &ej.1, cj.radius));
+            if d >= m || (pa - pb).norm() < 1e-9 {
+                continue;
+            }
+            let n = (pa - pb).normalize();
+            let (bi, bj) = (ci.body, cj.body);
+            // J_a − J_b along n: rows of both points, the second with its sign flipped.
+            self.point_jacobian(bi, &pa);
+            self.add_row(w, &n, (m - d) * 0.5);
+            self.point_jacobian(bj, &pb);
+            self.add_row(w, &(-n), (m - d) * 0.5);
+        }
+    }
+
+    /// Smoothness, posture and damping on the diagonal, and the hard bounds.
+    fn add_diagonal(&mut self, q: &[f64], prev: Option<(&[f64], f64)>) {
+        let s = &self.settings;
+        let model = &self.robot.model;
+        for j in 0..model.nq() {
+            self.h[(j, j)] += s.damping;
+            let (lo, hi) = model.coordinates[j].range;
+            let (mut lo, mut hi) = (lo, hi);
+            if let Some((qp, dt)) = prev {
+                self.h[(j, j)] += s.smoothness;
+                self.g[j] += s.smoothness * (q[j] - qp[j]);
+                let v = self.robot.velocity[j] * dt;
+                lo = lo.max(qp[j] - v);
+                hi = hi.min(qp[j] + v);
+            }
+            if j >= 6 {
+                self.h[(j, j)] += s.posture;
+                self.g[j] += s.posture * (q[j] - self.plan.reference[j]);
+            }
+            self.lb[j] = lo - q[j];
+            self.ub[j] = hi - q[j];
+        }
+    }
+}
+
+/// `log(R_target R_bodyᵀ)`: the world rotation vector taking the body to the target (rad).
+pub fn rot_error(target: &Matrix3<f64>, body: &Matrix3<f64>) -> Vector3<f64> {
+    Rotation3::from_matrix_unchecked(target * body.transpose()).scaled_axis()
+}
