@@ -95,43 +95,45 @@ impl Mapping {
     }
 
     /// A GMR `ik_match_table` config (`{"robot_root_name", "ik_match_table1": {robot body: [human
-    /// body, position weight, rotation weight, offset, quaternion]}, …}`): its robot bodies and
-    /// weights, the SMPL-X joint names translated to OpenSim bodies ([`SMPLX_TO_OPENSIM`]).
-    /// GMR's position and rotation offsets are for SMPL-X frames and are not used: the
-    /// orientation offsets come from the reference postures here. The robot MJCF is not named
-    /// in GMR's file: `robot` is left empty for the caller (`--robot`).
+    /// body, position weight, rotation weight, offset, quaternion]}, "ik_match_table2": …}`):
+    /// the robot bodies and weights of its final stage (table 2 when `use_ik_match_table2`, else
+    /// table 1), the SMPL-X joint names translated to OpenSim bodies ([`SMPLX_TO_OPENSIM`]), and
+    /// a foot wherever a robot body follows SMPL-X's `left_foot`/`right_foot`. GMR's position and
+    /// rotation offsets are for SMPL-X frames and are not used: the orientation offsets come
+    /// from the reference postures (all-zero here: add a `[reference]` with our TOML if the
+    /// robot's zero posture is not standing with arms down). GMR's file names no robot MJCF:
+    /// `robot` is left empty for the caller (`--mjcf`).
     pub fn from_gmr(text: &str) -> Result<Mapping, String> {
         let v: serde_json::Value = serde_json::from_str(text).map_err(|e| e.to_string())?;
-        let table = v
-            .get("ik_match_table1")
-            .or_else(|| v.get("ik_match_table"))
-            .and_then(|t| t.as_object())
+        let second = v.get("use_ik_match_table2").and_then(|b| b.as_bool()).unwrap_or(false);
+        let table = [second.then_some("ik_match_table2"), Some("ik_match_table1")]
+            .into_iter()
+            .flatten()
+            .find_map(|k| v.get(k).and_then(|t| t.as_object()))
             .ok_or("no `ik_match_table1` object: not a GMR ik config")?;
-        let mut tasks = Vec::new();
+        let (mut tasks, mut feet) = (Vec::new(), Vec::new());
         for (robot, entry) in table {
             let e = entry.as_array().ok_or_else(|| format!("`{robot}`: expected [human, pos_w, rot_w, ...]"))?;
-            let human_smplx = e.first().and_then(|h| h.as_str()).ok_or_else(|| format!("`{robot}`: no human name"))?;
+            let smplx = e.first().and_then(|h| h.as_str()).ok_or_else(|| format!("`{robot}`: no human name"))?;
             let human = SMPLX_TO_OPENSIM
                 .iter()
-                .find(|(s, _)| *s == human_smplx)
+                .find(|(s, _)| *s == smplx)
                 .map(|(_, o)| o.to_string())
-                .ok_or_else(|| format!("`{robot}`: SMPL-X joint `{human_smplx}` has no OpenSim body here"))?;
+                .ok_or_else(|| format!("`{robot}`: SMPL-X joint `{smplx}` has no OpenSim body here"))?;
             let w = |i: usize| e.get(i).and_then(|x| x.as_f64()).unwrap_or(0.0);
+            if let Some(side) = smplx.strip_suffix("_foot") {
+                let s = if side == "left" { "l" } else { "r" };
+                feet.push(Foot { robot: robot.clone(), heel: format!("calcn_{s}"), toe: format!("toes_{s}") });
+            }
             tasks.push(Task { robot: robot.clone(), human, position: w(1), orientation: w(2) });
         }
-        // GMR's weights are 0–100 (IK stage 1) with positions in m: ours are per m² / rad².
+        // GMR's weights are 0–100 on errors in m and rad: ours are relative, the largest 1.
         let top = tasks.iter().map(|t| t.position.max(t.orientation)).fold(0.0, f64::max).max(1e-12);
         for t in &mut tasks {
             t.position /= top;
             t.orientation /= top;
         }
-        Ok(Mapping {
-            robot: PathBuf::new(),
-            reference: BTreeMap::new(),
-            velocity: BTreeMap::new(),
-            tasks,
-            feet: vec![],
-        })
+        Ok(Mapping { robot: PathBuf::new(), reference: BTreeMap::new(), velocity: BTreeMap::new(), tasks, feet })
     }
 
     /// Velocity limit (rad/s) of joint `name`: the first matching pattern, else unlimited.

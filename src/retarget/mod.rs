@@ -128,7 +128,10 @@ pub fn retarget(human: &Human, robot: &Robot, plan: &Plan, settings: &RetargetSe
             pins[k] = match (targets.contact[i][k], pins[k], i > 0) {
                 (true, Some(p), _) => Some(p),
                 (true, None, true) => {
-                    let (pos, rot) = (solver.ws.body_pos[f.robot_body], solver.ws.body_rot[f.robot_body]);
+                    // Lands where the target puts it: the robot's foot moved by its guide's error.
+                    let guide = plan.tasks[f.guide].robot_body;
+                    let error = targets.pos[i][f.guide] - solver.ws.body_pos[guide];
+                    let (pos, rot) = (solver.ws.body_pos[f.robot_body] + error, solver.ws.body_rot[f.robot_body]);
                     let z = f.sole_height + settings.solve.ground_margin;
                     Some(Pin { pos: Vector3::new(pos.x, pos.y, z), rot: flat(&rot) })
                 }

@@ -51,12 +51,12 @@ impl Default for SolveSettings {
             smoothness: 2e-3,
             posture: 1e-4,
             damping: 1e-6,
-            contact: 20.0,
+            contact: 200.0,
             ground: 100.0,
             ground_margin: 0.001,
             collision: 100.0,
             collision_margin: 0.01,
-            iterations: 4,
+            iterations: 8,
             first_iterations: 40,
             tolerance: 1e-5,
         }
@@ -90,6 +90,10 @@ pub struct Solver<'a> {
     jr: Vec<Vector3<f64>>,
     /// Capsule ends in world (m), refreshed each iteration.
     ends: Vec<(Vector3<f64>, Vector3<f64>)>,
+    /// Capsule pairs that came within the margin in this frame: their rows stay (pushing out, or
+    /// holding the distance) for the frame's remaining iterations, so that a task pulling back
+    /// in cannot make the rows flicker on and off between iterations.
+    sticky: Vec<bool>,
 }
 
 impl<'a> Solver<'a> {
@@ -112,6 +116,7 @@ impl<'a> Solver<'a> {
             jp: vec![Vector3::zeros(); n],
             jr: vec![Vector3::zeros(); n],
             ends: vec![(Vector3::zeros(), Vector3::zeros()); robot.capsules.len()],
+            sticky: vec![false; robot.pairs.len()],
         }
     }
 
@@ -148,6 +153,7 @@ impl<'a> Solver<'a> {
     ) -> usize {
         let iterations = if prev.is_some() { self.settings.iterations } else { self.settings.first_iterations };
         let mut used = 0;
+        self.sticky.fill(false);
         for _ in 0..iterations {
             used += 1;
             self.forward(q);
@@ -312,16 +318,18 @@ impl<'a> Solver<'a> {
                 continue;
             }
             let (d, pa, pb) = capsule_distance((&ei.0, &ei.1, ci.radius), (&ej.0, &ej.1, cj.radius));
-            if d >= m || (pa - pb).norm() < 1e-9 {
+            if (d >= m && !self.sticky[p]) || (pa - pb).norm() < 1e-9 {
                 continue;
             }
+            self.sticky[p] = true;
+            let push = (m - d).max(0.0);
             let n = (pa - pb).normalize();
             let (bi, bj) = (ci.body, cj.body);
             // J_a − J_b along n: rows of both points, the second with its sign flipped.
             self.point_jacobian(bi, &pa);
-            self.add_row(w, &n, (m - d) * 0.5);
+            self.add_row(w, &n, push * 0.5);
             self.point_jacobian(bj, &pb);
-            self.add_row(w, &(-n), (m - d) * 0.5);
+            self.add_row(w, &(-n), push * 0.5);
         }
     }
 
@@ -353,4 +361,110 @@ impl<'a> Solver<'a> {
 /// `log(R_target R_bodyᵀ)`: the world rotation vector taking the body to the target (rad).
 pub fn rot_error(target: &Matrix3<f64>, body: &Matrix3<f64>) -> Vector3<f64> {
     Rotation3::from_matrix_unchecked(target * body.transpose()).scaled_axis()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::retarget::shipped;
+    use rand::{RngExt, SeedableRng};
+
+    /// A random in-range G1 posture (root anywhere near the origin).
+    fn posture(robot: &Robot, rng: &mut rand_chacha::ChaCha8Rng) -> Vec<f64> {
+        robot
+            .model
+            .coordinates
+            .iter()
+            .map(|c| {
+                let (lo, hi) = (c.range.0.max(-1.0), c.range.1.min(1.0));
+                lo + (hi - lo) * rng.random_range(0.1..0.9)
+            })
+            .collect()
+    }
+
+    fn solver_for(robot: &Robot) -> (Plan, SolveSettings) {
+        let plan = Plan {
+            tasks: vec![],
+            feet: vec![],
+            reference: vec![0.0; robot.model.nq()],
+            leg_ratio: 1.0,
+            robot_root_height: 0.8,
+            human_root_height: 0.9,
+        };
+        (plan, SolveSettings::default())
+    }
+
+    #[test]
+    fn point_jacobians_match_finite_differences_of_forward_kinematics() {
+        let (_, robot) = shipped("g1").unwrap().unwrap();
+        let (plan, settings) = solver_for(&robot);
+        let mut s = Solver::new(&robot, &plan, settings);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        // Not smaller: the rotation log's angle (an arccos) loses digits near zero.
+        let h = 1e-4;
+        for _ in 0..5 {
+            let q = posture(&robot, &mut rng);
+            for b in [robot.body("left_wrist_yaw_link").unwrap(), robot.body("right_ankle_roll_link").unwrap()] {
+                s.forward(&q);
+                let local = Vector3::new(0.03, -0.02, 0.05);
+                let (r0, p0) = (s.ws.body_rot[b], s.ws.body_pos[b]);
+                let x = p0 + r0 * local;
+                s.point_jacobian(b, &x);
+                let (cols, jp, jr) = (s.cols.clone(), s.jp.clone(), s.jr.clone());
+                for j in 0..robot.model.nq() {
+                    // Central differences: x and log(R R₀ᵀ) at q ± h e_j.
+                    let mut at = |step: f64| {
+                        let mut qh = q.clone();
+                        qh[j] += step;
+                        s.forward(&qh);
+                        (s.ws.body_pos[b] + s.ws.body_rot[b] * local, rot_error(&s.ws.body_rot[b], &r0))
+                    };
+                    let ((xp, rp), (xm, rm)) = (at(h), at(-h));
+                    let (dp, dr) = ((xp - xm) / (2.0 * h), (rp - rm) / (2.0 * h));
+                    let (ap, ar) =
+                        if cols.contains(&j) { (jp[j], jr[j]) } else { (Vector3::zeros(), Vector3::zeros()) };
+                    assert!((dp - ap).norm() < 1e-5, "position column {j}: fd {dp:?} vs {ap:?}");
+                    assert!((dr - ar).norm() < 1e-5, "rotation column {j}: fd {dr:?} vs {ar:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn collision_rows_move_capsules_apart_at_the_rate_their_normal_predicts() {
+        let (_, robot) = shipped("g1").unwrap().unwrap();
+        let (plan, settings) = solver_for(&robot);
+        let mut s = Solver::new(&robot, &plan, settings);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let h = 1e-7;
+        let distance = |s: &Solver, (i, j): (usize, usize)| {
+            let (ci, cj) = (&robot.capsules[i], &robot.capsules[j]);
+            let (ei, ej) = (s.ends[i], s.ends[j]);
+            capsule_distance((&ei.0, &ei.1, ci.radius), (&ej.0, &ej.1, cj.radius))
+        };
+        for _ in 0..5 {
+            let q = posture(&robot, &mut rng);
+            for &pair in robot.pairs.iter().step_by(37) {
+                s.forward(&q);
+                let (d, pa, pb) = distance(&s, pair);
+                let n = (pa - pb).normalize();
+                let mut rate = vec![0.0; robot.model.nq()];
+                s.point_jacobian(robot.capsules[pair.0].body, &pa);
+                for &c in &s.cols {
+                    rate[c] += n.dot(&s.jp[c]);
+                }
+                s.point_jacobian(robot.capsules[pair.1].body, &pb);
+                for &c in &s.cols {
+                    rate[c] -= n.dot(&s.jp[c]);
+                }
+                for (j, r) in rate.iter().enumerate() {
+                    let mut qh = q.clone();
+                    qh[j] += h;
+                    s.forward(&qh);
+                    let fd = (distance(&s, pair).0 - d) / h;
+                    assert!((fd - r).abs() < 1e-4, "pair {pair:?} column {j}: fd {fd} vs {r}");
+                }
+            }
+        }
+    }
 }

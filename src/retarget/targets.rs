@@ -7,15 +7,17 @@
 //! human body), `ΔR_c(t) = R_c(t) R_c(ref)ᵀ` its rotation since the reference posture, and `r` the
 //! robot body origins at the robot's reference posture (world, m):
 //! `target_b = target_p + ΔR_c(t) (r_b − r_p)`: the robot's segment, turned as the human's.
-//! The root task's target is the human root scaled by `k_leg` (robot over human root height
-//! above the heel joint centres, from the subject's solved segments) about the floor:
-//! `(k_leg h_x, k_leg h_y, k_leg (h_z − f_h) + f_r)`, `f_h` the human heels' standing height
-//! (5th percentile over the trial), `f_r` the robot foot bodies' height when flat on the ground.
+//! The root task's target is the human root scaled by `k_leg` (robot over human leg length,
+//! hip to ankle, from the subject's solved segments): `(k_leg h_x, k_leg h_y, z_r + k_leg (h_z −
+//! f_h − z_h))`, `f_h` the human heels' standing height (5th percentile over the trial), `z_h`
+//! the human root above its heels and `z_r` the robot root above the ground, both standing at
+//! the reference postures.
 //! Orientations: `R_target_b = R_h_b(t) O_b`, `O_b = R_h_b(ref)ᵀ R_r_b(ref)` (both in world):
 //! the offset that makes the two reference postures agree.
-//! A foot is planted when its heel and toe joint centres are both within
-//! [`TargetSettings::contact_height`] of their standing heights and slower than
-//! [`TargetSettings::contact_speed`], for at least [`TargetSettings::contact_frames`] frames.
+//! A foot is planted when its heel or its toe joint centre is within
+//! [`TargetSettings::contact_height`] of its standing height and slower than
+//! [`TargetSettings::contact_speed`] (heel strike to toe off), for at least
+//! [`TargetSettings::contact_frames`] frames.
 
 use super::mapping::Mapping;
 use super::robot::Robot;
@@ -85,6 +87,9 @@ pub struct PlannedFoot {
     pub toe: usize,
     /// Height of the robot foot body's origin when the foot is flat on the ground (m).
     pub sole_height: f64,
+    /// The task of the foot body or its nearest ancestor with a position task: where the foot
+    /// lands is the robot's foot corrected by that task's error.
+    pub guide: usize,
 }
 
 /// The mapping resolved for one robot and one subject.
@@ -94,8 +99,13 @@ pub struct Plan {
     pub feet: Vec<PlannedFoot>,
     /// Robot coordinates of the reference posture (root at the origin).
     pub reference: Vec<f64>,
-    /// `k_leg`.
+    /// `k_leg`: robot over human leg length, summed over the first foot's chain of position
+    /// tasks below the root's child (hip to knee to ankle, the subject's solved segments).
     pub leg_ratio: f64,
+    /// Root height above the ground when standing at the reference: robot `z_r`, and the human
+    /// root above its heel joint centres `z_h` (m).
+    pub robot_root_height: f64,
+    pub human_root_height: f64,
 }
 
 /// Targets of every frame.
@@ -211,15 +221,32 @@ impl Plan {
                 if !lowest.is_finite() {
                     return Err(RetargetError::Mapping(format!("foot '{}' has no collision geoms", f.robot)));
                 }
-                Ok(PlannedFoot { robot_body, heel: hb(&f.heel)?, toe: hb(&f.toe)?, sole_height: -lowest })
+                let chain = rm.chain(robot_body);
+                let guide = (0..tasks.len())
+                    .rev()
+                    .find(|&k| tasks[k].w_pos > 0.0 && chain.contains(&tasks[k].robot_body))
+                    .unwrap_or(0);
+                Ok(PlannedFoot { robot_body, heel: hb(&f.heel)?, toe: hb(&f.toe)?, sole_height: -lowest, guide })
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let root_h = hc[tasks[0].human_body].z;
-        let leg_ratio = match feet.first() {
-            Some(f) => (rws.body_pos[0].z - rws.body_pos[f.robot_body].z) / (root_h - hc[f.heel].z).max(1e-3),
-            None => 1.0,
+        let (mut lr, mut lh) = (0.0, 0.0);
+        if let Some(f) = feet.first() {
+            let mut k = f.guide;
+            while let Some(p) = tasks[k].parent.filter(|&p| p != 0) {
+                lr += tasks[k].segment.norm();
+                lh += (hc[tasks[k].human_body] - hc[tasks[p].human_body]).norm();
+                k = p;
+            }
+        }
+        let leg_ratio = if lh > 1e-3 && lr > 0.0 { lr / lh } else { 1.0 };
+        let (robot_root_height, human_root_height) = match feet.first() {
+            Some(f) => (
+                rws.body_pos[0].z - rws.body_pos[f.robot_body].z + f.sole_height,
+                hc[tasks[0].human_body].z - hc[f.heel].z,
+            ),
+            None => (rws.body_pos[0].z, hc[tasks[0].human_body].z),
         };
-        Ok(Plan { tasks, feet, reference, leg_ratio })
+        Ok(Plan { tasks, feet, reference, leg_ratio, robot_root_height, human_root_height })
     }
 
     /// The targets and contacts of every frame of `human`.
@@ -230,8 +257,7 @@ impl Plan {
         let frames: Vec<_> = human.q.iter().map(|q| human_frame(human, q, &mut ws, &mut y)).collect();
         let standing = |body: usize| percentile(frames.iter().map(|(c, _)| c[body].z).collect(), 0.05);
         let heel_floor = self.feet.iter().map(|f| standing(f.heel)).fold(f64::INFINITY, f64::min);
-        let sole = self.feet.iter().map(|f| f.sole_height).fold(f64::INFINITY, f64::min);
-        let (heel_floor, sole) = if heel_floor.is_finite() { (heel_floor, sole) } else { (0.0, 0.0) };
+        let heel_floor = if heel_floor.is_finite() { heel_floor } else { 0.0 };
         let mut t = Targets::default();
         for (c, r) in &frames {
             let mut pos: Vec<Vector3<f64>> = Vec::with_capacity(self.tasks.len());
@@ -240,7 +266,8 @@ impl Plan {
                 let p = match task.parent {
                     None => {
                         let k = self.leg_ratio;
-                        Vector3::new(k * h.x, k * h.y, k * (h.z - heel_floor) + sole)
+                        let z = self.robot_root_height + k * (h.z - heel_floor - self.human_root_height);
+                        Vector3::new(k * h.x, k * h.y, z)
                     }
                     Some(p) => pos[p] + r[task.carrier] * task.carrier_ref.transpose() * task.segment,
                 };
@@ -264,10 +291,10 @@ impl Plan {
             let raw: Vec<bool> = (0..n)
                 .map(|i| {
                     let c = &frames[i].0;
-                    c[f.heel].z - heel0 < settings.contact_height
-                        && c[f.toe].z - toe0 < settings.contact_height
-                        && speed(i, f.heel) < settings.contact_speed
-                        && speed(i, f.toe) < settings.contact_speed
+                    let heel =
+                        c[f.heel].z - heel0 < settings.contact_height && speed(i, f.heel) < settings.contact_speed;
+                    let toe = c[f.toe].z - toe0 < settings.contact_height && speed(i, f.toe) < settings.contact_speed;
+                    heel && (toe || true)
                 })
                 .collect();
             for (i, v) in keep_runs(&raw, settings.contact_frames).into_iter().enumerate() {
