@@ -249,3 +249,37 @@ fn the_label_screen_allocates_no_more_for_more_frames() {
     // Per rigid-pair candidate a sample buffer reserved once; per frame nothing (clean frames).
     assert!(b <= a + 20, "500 frames: {a} allocations, 2000 frames: {b}");
 }
+
+#[test]
+fn retargeting_frames_onto_the_g1_allocates_nothing_once_warm() {
+    use smocap::retarget::{self, solve::Solver, Human, Plan};
+    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _counted = Counted::on();
+    let ctx = Context::shipped().unwrap();
+    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 60, seed: 3, ..SynthOptions::default() });
+    let scales: Vec<f64> =
+        ctx.model.bodies.iter().flat_map(|b| s.truth.body_scales.get(&b.name).copied().unwrap_or([1.0; 3])).collect();
+    let times: Vec<f64> = (0..60).map(|i| i as f64 / 100.0).collect();
+    let human = Human {
+        model: &ctx.model,
+        scales: &scales,
+        q: &s.truth.coordinates,
+        times: &times,
+        world_from_model: smocap::archive::mcap_out::world_from_model(ctx.up),
+    };
+    let (mapping, robot) = retarget::shipped("g1").unwrap().unwrap();
+    let plan = Plan::new(&robot, &mapping, &human).unwrap();
+    let targets = plan.targets(&human, &Default::default());
+    let mut solver = Solver::new(&robot, &plan, Default::default());
+    let (mut q, mut prev) = (plan.reference.clone(), plan.reference.clone());
+    let pins = vec![None; plan.feet.len()];
+    solver.frame(&targets, 0, &mut q, None, &pins);
+    prev.copy_from_slice(&q);
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    for i in 1..60 {
+        solver.frame(&targets, i, &mut q, Some((&prev, 0.01)), &pins);
+        prev.copy_from_slice(&q);
+    }
+    let allocated = ALLOCATIONS.load(Ordering::Relaxed) - before;
+    assert_eq!(allocated, 0, "59 retargeted frames allocated {allocated} times");
+}
