@@ -25,6 +25,10 @@ pub struct RetargetArgs {
     /// Settings (TOML: `[targets]` and `[solve]` tables of RetargetSettings); default: built in.
     #[arg(long)]
     pub settings: Option<PathBuf>,
+    /// Also write `<trial>.targets.npz`: every task's target per frame and the planted feet
+    /// (what the robot was asked to do; `scripts/compare_mink.py` drives mink with it).
+    #[arg(long)]
+    pub targets: bool,
     /// Print nothing but errors.
     #[arg(long, short)]
     pub quiet: bool,
@@ -57,6 +61,9 @@ pub fn run(a: RetargetArgs) -> anyhow::Result<u8> {
         files::write_gmr_pickle(&stem.with_extension("pkl"), &done.motion)?;
         files::write_mjlab_csv(&stem.with_extension("csv"), &done.motion)?;
         files::write_npz(&stem.with_extension("npz"), &done.motion)?;
+        if a.targets {
+            files::write_targets_npz(&stem.with_extension("targets.npz"), &done.targets)?;
+        }
         let json = serde_json::to_string_pretty(&done.report)? + "\n";
         crate::render::png_out::write_atomic(&stem.with_extension("json"), json.as_bytes())?;
         let r = &done.report;

@@ -51,6 +51,13 @@ impl Workspace {
         }
     }
 
+    /// Motion `k` at the last [`forward`]: its world axis, a world point on it (m), and the
+    /// derivative `f'` times `σ` (rotations: `σ = 1`) of its amount by its coordinate.
+    #[inline]
+    pub fn motion(&self, k: usize) -> (Vector3<f64>, Vector3<f64>, f64) {
+        (self.motion_axis[k], self.motion_origin[k], self.motion_der[k] * self.motion_sigma[k])
+    }
+
     /// World position of marker `m` (m).
     pub fn marker(&self, m: usize) -> Vector3<f64> {
         Vector3::new(self.markers[3 * m], self.markers[3 * m + 1], self.markers[3 * m + 2])

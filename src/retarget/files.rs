@@ -242,6 +242,46 @@ pub fn write_npz(path: &Path, m: &RobotMotion) -> Result<(), FilesError> {
     write_atomic(path, &zip_stored(&entries))
 }
 
+/// What the robot was asked to do, per frame (for inspection and for driving other IK
+/// libraries with the same targets, `scripts/compare_mink.py`).
+#[derive(Clone, Debug)]
+pub struct TargetRecord {
+    pub fps: f64,
+    /// Per task: the robot body, the human body, and the position / orientation weights.
+    pub robot_bodies: Vec<String>,
+    pub human_bodies: Vec<String>,
+    pub weights: Vec<[f64; 2]>,
+    /// Per frame, per task: target position (m, world) and orientation (row-major 3×3, world).
+    pub pos: Vec<Vec<[f64; 3]>>,
+    pub rot: Vec<Vec<[f64; 9]>>,
+    /// The feet's robot bodies and, per frame, whether each is planted (1) or not (0).
+    pub feet: Vec<String>,
+    pub contact: Vec<Vec<f64>>,
+}
+
+/// Writes `t` as an NPZ: `fps` (), `robot_bodies`/`human_bodies` (tasks,) `<U…`, `weights`
+/// (tasks, 2), `pos` (F, tasks, 3), `rot` (F, tasks, 3, 3), `feet` (feet,) `<U…`, `contact`
+/// (F, feet) float64.
+pub fn write_targets_npz(path: &Path, t: &TargetRecord) -> Result<(), FilesError> {
+    let (f, n, nf) = (t.pos.len(), t.robot_bodies.len(), t.feet.len());
+    let bad = |what: &str| Err(FilesError::Motion { file: path.display().to_string(), what: what.into() });
+    let rows_ok = t.pos.iter().all(|r| r.len() == n) && t.rot.iter().all(|r| r.len() == n);
+    if t.rot.len() != f || t.contact.len() != f || !rows_ok || t.contact.iter().any(|c| c.len() != nf) {
+        return bad("targets: frames or tasks disagree");
+    }
+    let entries = [
+        ("fps.npy", npy_f64(&[], [t.fps].into_iter())),
+        ("robot_bodies.npy", npy_str(&t.robot_bodies)),
+        ("human_bodies.npy", npy_str(&t.human_bodies)),
+        ("weights.npy", npy_f64(&[n, 2], t.weights.iter().flatten().copied())),
+        ("pos.npy", npy_f64(&[f, n, 3], t.pos.iter().flatten().flatten().copied())),
+        ("rot.npy", npy_f64(&[f, n, 3, 3], t.rot.iter().flatten().flatten().copied())),
+        ("feet.npy", npy_str(&t.feet)),
+        ("contact.npy", npy_f64(&[f, nf], t.contact.iter().flatten().copied())),
+    ];
+    write_atomic(path, &zip_stored(&entries))
+}
+
 /// An NPY 1.0 file: `\x93NUMPY`, version 1 0, header length (u16 LE), the header (a Python dict
 /// literal `{'descr': …, 'fortran_order': False, 'shape': (…), }` padded with spaces and ended by
 /// `\n` so that the data start at a multiple of 64 bytes), then `data` in C order.

@@ -53,6 +53,23 @@ pub struct Retargeted {
     pub report: Report,
     /// Robot coordinates per frame (root x y z, z-y-x angles, joints).
     pub q: Vec<Vec<f64>>,
+    /// The targets and contacts the robot was solved to.
+    pub targets: files::TargetRecord,
+}
+
+/// The targets of `plan` as a [`files::TargetRecord`].
+fn target_record(robot: &Robot, plan: &Plan, human: &Human, t: &targets::Targets, fps: f64) -> files::TargetRecord {
+    let body = |b: usize| robot.model.bodies[b].name.clone();
+    files::TargetRecord {
+        fps,
+        robot_bodies: plan.tasks.iter().map(|k| body(k.robot_body)).collect(),
+        human_bodies: plan.tasks.iter().map(|k| human.model.bodies[k.human_body].name.clone()).collect(),
+        weights: plan.tasks.iter().map(|k| [k.w_pos, k.w_rot]).collect(),
+        pos: t.pos.iter().map(|f| f.iter().map(|p| [p.x, p.y, p.z]).collect()).collect(),
+        rot: t.rot.iter().map(|f| f.iter().map(|r| std::array::from_fn(|i| r[(i / 3, i % 3)])).collect()).collect(),
+        feet: plan.feet.iter().map(|f| body(f.robot_body)).collect(),
+        contact: t.contact.iter().map(|c| c.iter().map(|&b| f64::from(u8::from(b))).collect()).collect(),
+    }
 }
 
 /// Robots shipped inside the binary: name, MJCF, the mapping from the OpenSim full-body families.
@@ -118,7 +135,7 @@ pub fn retarget(human: &Human, robot: &Robot, plan: &Plan, settings: &RetargetSe
         let (roll, pitch, yaw) = Rotation3::from_matrix_unchecked(r[0]).euler_angles();
         q[3..6].copy_from_slice(&[yaw, pitch, roll]);
     }
-    let mut prev = q.clone();
+    let (mut prev, mut prev2) = (q.clone(), q.clone());
     let mut pins: Vec<Option<Pin>> = vec![None; plan.feet.len()];
     let mut out = report::Recorder::new(robot, plan, n);
     let mut all_q = Vec::with_capacity(n);
@@ -138,12 +155,20 @@ pub fn retarget(human: &Human, robot: &Robot, plan: &Plan, settings: &RetargetSe
                 _ => None,
             };
         }
+        if i >= 2 {
+            // Warm start: the last two frames' velocity continued (the solve starts closer).
+            for ((qj, p), p2) in q.iter_mut().zip(&prev).zip(&prev2) {
+                *qj = p + (p - p2);
+            }
+        }
         let used = solver.frame(&targets, i, &mut q, (i > 0).then_some((prev.as_slice(), dt)), &pins);
         out.record(&solver, &targets, i, &q, used);
+        prev2.copy_from_slice(&prev);
         prev.copy_from_slice(&q);
         all_q.push(q.clone());
     }
     let fps = if n > 1 { (n - 1) as f64 / (human.times[n - 1] - human.times[0]).max(1e-9) } else { 0.0 };
     let (motion, report) = out.finish(robot, plan, human, &targets, &all_q, fps, settings, name);
-    Retargeted { motion, report, q: all_q }
+    let targets = target_record(robot, plan, human, &targets, fps);
+    Retargeted { motion, report, q: all_q, targets }
 }

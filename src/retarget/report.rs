@@ -1,7 +1,6 @@
 //! The quality report of one retargeted trial: tracking, limits, feet, self-collision, jerk,
 //! and a verdict (`ok` only when every hard requirement holds).
 
-use super::collide::capsule_distance;
 use super::files::RobotMotion;
 use super::robot::Robot;
 use super::solve::Solver;
@@ -114,7 +113,7 @@ pub(super) struct Recorder {
     errors: Vec<Vec<f64>>,
     /// Per foot, per frame: body origin (world) and lowest capsule point above ground (m).
     feet: Vec<Vec<(Vector3<f64>, f64)>>,
-    /// Per frame: the smallest capsule-pair distance (m).
+    /// Per frame: the smallest capsule-pair distance (m; `+∞` when no bounding spheres touch).
     closest: Vec<f64>,
     iterations: usize,
 }
@@ -152,15 +151,7 @@ impl Recorder {
                 .fold(f64::INFINITY, f64::min);
             self.feet[k].push((ws.body_pos[f.robot_body], low));
         }
-        let ends = s.ends();
-        let closest = robot
-            .pairs
-            .iter()
-            .map(|&(a, b)| {
-                let (ca, cb) = (&robot.capsules[a], &robot.capsules[b]);
-                capsule_distance((&ends[a].0, &ends[a].1, ca.radius), (&ends[b].0, &ends[b].1, cb.radius)).0
-            })
-            .fold(f64::INFINITY, f64::min);
+        let closest = s.closest_pair();
         self.closest.push(closest);
         self.iterations += used;
     }

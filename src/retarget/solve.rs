@@ -51,14 +51,14 @@ impl Default for SolveSettings {
             smoothness: 2e-3,
             posture: 1e-4,
             damping: 1e-6,
-            contact: 200.0,
+            contact: 2000.0,
             ground: 100.0,
             ground_margin: 0.001,
             collision: 100.0,
             collision_margin: 0.01,
             iterations: 8,
             first_iterations: 40,
-            tolerance: 1e-5,
+            tolerance: 1e-4,
         }
     }
 }
@@ -85,11 +85,15 @@ pub struct Solver<'a> {
     qp: BoxQp,
     /// Point Jacobian scratch: columns touched, and per column the position / angular parts.
     cols: Vec<usize>,
-    touched: Vec<bool>,
     jp: Vec<Vector3<f64>>,
     jr: Vec<Vector3<f64>>,
-    /// Capsule ends in world (m), refreshed each iteration.
+    /// Per body: the coordinate-driven motions on its chain, `(motion, coordinate, rotation?)`
+    /// (each robot coordinate drives one motion: hinges and the free joint).
+    chains: Vec<Vec<(usize, usize, bool)>>,
+    /// Capsule ends in world (m), refreshed each iteration, and each capsule's bounding sphere
+    /// (centre, radius).
     ends: Vec<(Vector3<f64>, Vector3<f64>)>,
+    bounds: Vec<(Vector3<f64>, f64)>,
     /// Capsule pairs that came within the margin in this frame: their rows stay (pushing out, or
     /// holding the distance) for the frame's remaining iterations, so that a task pulling back
     /// in cannot make the rows flicker on and off between iterations.
@@ -112,10 +116,11 @@ impl<'a> Solver<'a> {
             dx: DVector::zeros(n),
             qp: BoxQp::with_capacity(n),
             cols: Vec::with_capacity(n),
-            touched: vec![false; n],
             jp: vec![Vector3::zeros(); n],
             jr: vec![Vector3::zeros(); n],
+            chains: chain_motions(&robot.model),
             ends: vec![(Vector3::zeros(), Vector3::zeros()); robot.capsules.len()],
+            bounds: vec![(Vector3::zeros(), 0.0); robot.capsules.len()],
             sticky: vec![false; robot.pairs.len()],
         }
     }
@@ -135,9 +140,10 @@ impl<'a> Solver<'a> {
     pub fn forward(&mut self, q: &[f64]) {
         self.robot.state(q, &mut self.y);
         cpu::forward(&self.robot.model, &self.y, &mut self.ws);
-        for (c, e) in self.robot.capsules.iter().zip(self.ends.iter_mut()) {
+        for ((c, e), b) in self.robot.capsules.iter().zip(self.ends.iter_mut()).zip(self.bounds.iter_mut()) {
             let (r, p) = (&self.ws.body_rot[c.body], &self.ws.body_pos[c.body]);
             *e = (p + r * c.a, p + r * c.b);
+            *b = ((e.0 + e.1) * 0.5, 0.5 * (c.b - c.a).norm() + c.radius);
         }
     }
 
@@ -177,6 +183,22 @@ impl<'a> Solver<'a> {
             self.forward(q);
         }
         used
+    }
+
+    /// The smallest signed distance (m) between two capsules that may collide, among those whose
+    /// bounding spheres touch (`+∞` when none do: then no pair overlaps).
+    pub fn closest_pair(&self) -> f64 {
+        let mut best = f64::INFINITY;
+        for &(i, j) in &self.robot.pairs {
+            let ((bi, ri), (bj, rj)) = (self.bounds[i], self.bounds[j]);
+            if (bi - bj).norm_squared() > (ri + rj).powi(2) {
+                continue;
+            }
+            let (ci, cj) = (&self.robot.capsules[i], &self.robot.capsules[j]);
+            let (ei, ej) = (&self.ends[i], &self.ends[j]);
+            best = best.min(capsule_distance((&ei.0, &ei.1, ci.radius), (&ej.0, &ej.1, cj.radius)).0);
+        }
+        best
     }
 
     /// Lowest point of any planted-capable foot's capsules above the ground (m).
@@ -220,27 +242,24 @@ impl<'a> Solver<'a> {
         self.add_diagonal(q, prev);
     }
 
-    /// Fills `cols`, `jp`, `jr` with the Jacobian of world point `x` fixed on body `b`.
+    /// Fills `cols`, `jp`, `jr` with the Jacobian of world point `x` fixed on body `b`: a
+    /// rotation of rate `f'` about world axis `ω` through `o` moves it by `f' ω × (x − o)` and
+    /// turns it by `f' ω`; a translation moves it by `f' σ ω` ([`cpu::chain_contributions`]
+    /// without the scale columns, which the robot does not have).
     fn point_jacobian(&mut self, b: usize, x: &Vector3<f64>) {
-        for &c in &self.cols {
-            self.touched[c] = false;
-        }
         self.cols.clear();
-        let nq = self.robot.model.nq();
-        let (cols, touched, jp, jr) = (&mut self.cols, &mut self.touched, &mut self.jp, &mut self.jr);
-        cpu::chain_contributions(&self.robot.model, &self.ws, b, |j, a, w| {
-            if j >= nq {
-                return;
+        for &(k, j, rotation) in &self.chains[b] {
+            let (axis, origin, rate) = self.ws.motion(k);
+            let w = axis * rate;
+            self.cols.push(j);
+            if rotation {
+                self.jp[j] = w.cross(&(x - origin));
+                self.jr[j] = w;
+            } else {
+                self.jp[j] = w;
+                self.jr[j] = Vector3::zeros();
             }
-            if !touched[j] {
-                touched[j] = true;
-                cols.push(j);
-                jp[j] = Vector3::zeros();
-                jr[j] = Vector3::zeros();
-            }
-            jp[j] += a + w.cross(x);
-            jr[j] += w;
-        });
+        }
     }
 
     /// `w |J_p Δ − e|²` with the Jacobian in `jp`.
@@ -313,8 +332,8 @@ impl<'a> Solver<'a> {
             let (i, j) = self.robot.pairs[p];
             let (ci, cj) = (&self.robot.capsules[i], &self.robot.capsules[j]);
             let (ei, ej) = (self.ends[i], self.ends[j]);
-            let reach = 0.5 * ((ei.1 - ei.0).norm() + (ej.1 - ej.0).norm()) + ci.radius + cj.radius + m;
-            if (0.5 * (ei.0 + ei.1 - ej.0 - ej.1)).norm() > reach {
+            let ((bi, ri), (bj, rj)) = (self.bounds[i], self.bounds[j]);
+            if !self.sticky[p] && (bi - bj).norm_squared() > (ri + rj + m).powi(2) {
                 continue;
             }
             let (d, pa, pb) = capsule_distance((&ei.0, &ei.1, ci.radius), (&ej.0, &ej.1, cj.radius));
@@ -356,6 +375,23 @@ impl<'a> Solver<'a> {
             self.ub[j] = hi - q[j];
         }
     }
+}
+
+/// Per body, the coordinate-driven motions of its chain (root first).
+fn chain_motions(model: &crate::model::Model) -> Vec<Vec<(usize, usize, bool)>> {
+    (0..model.nb())
+        .map(|b| {
+            model
+                .chain(b)
+                .iter()
+                .flat_map(|&a| model.bodies[a].joint.motions.clone())
+                .filter_map(|k| {
+                    let m = &model.motions[k];
+                    m.coordinate.map(|c| (k, c, m.kind == crate::model::MotionKind::Rotation))
+                })
+                .collect()
+        })
+        .collect()
 }
 
 /// `log(R_target R_bodyᵀ)`: the world rotation vector taking the body to the target (rad).

@@ -72,7 +72,7 @@ impl<'a> Builder<'a> {
         let size = a.get("size").and_then(|(_, v)| super::attrs::parse_numbers(v)).unwrap_or_default();
         let radius = size.first().copied().unwrap_or(0.0);
         let bad = |what: &str| self.ctx.err_at(a.pos("size", node), "geom", format!("{kind}: {what}"));
-        if !(radius > 0.0) && matches!(kind, "sphere" | "capsule") {
+        if (radius.is_nan() || radius <= 0.0) && matches!(kind, "sphere" | "capsule") {
             return Err(bad("needs size[0] > 0 (the radius)"));
         }
         let pos = self.ctx.vec3(node, a, "pos")?.unwrap_or_default();
