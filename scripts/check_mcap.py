@@ -7,8 +7,9 @@ schema name (Foxglove's well-known names for /tf, /markers, /scene); decodes eve
 mcap-protobuf-support from the file's own descriptors; checks one message per frame on the
 per-frame channels (the `frames` of the smocap.run metadata record) and one on /scene and
 /smocap/subject; that the arrays agree with /smocap/subject (coordinates, marker points); that
-every /tf message forms one tree rooted at `world`; and, with the `foxglove-schemas-protobuf`
-package installed, that every Foxglove message of the file's descriptors matches Foxglove's
+every /tf message forms one tree rooted at `world`; the robot's /robot/tf (one per frame, one
+tree rooted at `world`) and /robot/scene (once) when present; and, with the
+`foxglove-schemas-protobuf` package installed, that every Foxglove message of the file's descriptors matches Foxglove's
 official descriptor field by field (name, number, type, label, message type) and that every
 Foxglove message parses with the official class without unknown fields. Exits 1 when any check
 fails.
@@ -43,6 +44,12 @@ PER_FRAME = {
 ONCE = {"/scene": "foxglove.SceneUpdate", "/smocap/subject": "smocap.Subject", "/smocap/label_qc": "smocap.LabelQc"}
 # Written only by trials with unfittable frames (issue 32).
 OPTIONAL = {"/smocap/unfittable": "smocap.Unfittable"}
+# Written by `smocap convert --robot` and `smocap retarget --into-mcap` (issue 31): when present,
+# /robot/tf has one message per frame (a tree rooted at `world`) and /robot/scene one message.
+ROBOT_PER_FRAME = {"/robot/tf": "foxglove.FrameTransforms"}
+ROBOT_ONCE = {"/robot/scene": "foxglove.SceneUpdate"}
+OPTIONAL.update(ROBOT_PER_FRAME)
+OPTIONAL.update(ROBOT_ONCE)
 
 
 def official_class(full_name):
@@ -142,7 +149,7 @@ def check(path, every):
                 o = cls.FromString(message.data)
                 if UnknownFieldSet is not None and len(UnknownFieldSet(o)):
                     errors.append(f"{channel.topic} seq {message.sequence}: unknown fields for Foxglove's {schema.name}")
-            if channel.topic == "/tf":
+            if channel.topic in ("/tf", "/robot/tf"):
                 check_tree(msg, message.sequence, errors)
             if subject is not None and channel.topic == "/smocap/state" and len(msg.q) != len(subject.coordinates):
                 errors.append(f"/smocap/state seq {message.sequence}: {len(msg.q)} q for {len(subject.coordinates)} coordinates")
@@ -163,6 +170,13 @@ def check(path, every):
         for t in ONCE:
             if seen.get(t, 0) != 1:
                 errors.append(f"{t}: {seen.get(t, 0)} messages, expected 1")
+        if any(t in topics for t in list(ROBOT_PER_FRAME) + list(ROBOT_ONCE)):
+            for t in ROBOT_PER_FRAME:
+                if frames is not None and seen.get(t, 0) != frames:
+                    errors.append(f"{t}: {seen.get(t, 0)} messages for {frames} frames")
+            for t in ROBOT_ONCE:
+                if seen.get(t, 0) != 1:
+                    errors.append(f"{t}: {seen.get(t, 0)} messages, expected 1")
     return [f"{path}: {e}" for e in errors]
 
 

@@ -1,7 +1,7 @@
 //! Converted files read by Python users' tools: `scripts/check_mcap.py` (the official `mcap`
 //! readers and `mcap-protobuf-support` decode every message of every channel from the file's own
 //! descriptors; Foxglove's messages match `foxglove-schemas-protobuf` field by field; every
-//! `/tf` is one tree rooted at `world`) on the synthetic archive and both shared OpenSim
+//! `/tf` and `/robot/tf` is one tree rooted at `world`) on the synthetic archive (with `--robot g1`) and both shared OpenSim
 //! datasets. (The NumPy/pandas recipe of docs/guide/python.md, `scripts/load_trial.py` on the
 //! smocap Python package, is tested by `python/tests/test_load_trial.py`.)
 //!
@@ -51,7 +51,8 @@ fn python_mcap_readers_decode_every_message_of_every_converted_channel() {
     )
     .unwrap();
     let out = dir.join("out");
-    convert(&[toml.to_str().unwrap()], &out);
+    // With the robot's channels (issue 31), which the readers check too.
+    convert(&[toml.to_str().unwrap(), "--robot", "g1"], &out);
     let shipped = repo().join("datasets.toml");
     for d in ["gait2354_subject01", "rajagopal2016_walk"] {
         if repo().join("../shared/datasets").join(d).is_dir() {

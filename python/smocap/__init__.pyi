@@ -289,6 +289,26 @@ class Trial:
         """The subject's body mesh posed at every frame (as ``smocap export --mesh``):
         ``(vertices, faces)``, vertices float32 (frames, V, 3) in the Z-up world (m), faces
         uint32 (F, 3), counter-clockwise seen from outside."""
+    def retarget(
+        self,
+        robot: str = "g1",
+        mjcf: Optional[_PathLike] = None,
+        settings: Optional[_PathLike] = None,
+    ) -> Tuple[pd.DataFrame, Dict[str, Any]]:
+        """Retargets the trial onto a humanoid robot as ``smocap retarget`` does (nothing is
+        written): ``(q, report)``.
+
+        ``q``: MuJoCo's ``qpos`` per frame, index ``time_s`` (as :attr:`q`'s), columns
+        ``root_x``, ``root_y``, ``root_z`` (m, Z-up world), ``root_qw``, ``root_qx``, ``root_qy``,
+        ``root_qz`` (root orientation, w first as MuJoCo), then one per robot joint (rad, MJCF
+        order; ``q.iloc[:, 7:]`` are the joint angles, ``q.to_numpy()`` the ``qpos`` array).
+        ``report``: the quality report as ``smocap retarget`` writes it (``status``,
+        ``reasons``, ``end_effector_median_mm``, ``tracking``, ``feet``, ``range_violations``...).
+
+        ``robot`` is a shipped robot (``"g1"``, the Unitree G1) or a mapping file (TOML, or GMR's
+        JSON with ``mjcf``); ``settings`` a TOML file of retargeting settings. Raises
+        :class:`ModelError` for a robot or mapping that cannot be read, :class:`SmocapError` when
+        the trial's model lacks a body the mapping needs."""
     def __len__(self) -> int: ...
 
 def render(

@@ -1,7 +1,7 @@
 //! `read_trial` and `Trial`: a trial converted by `smocap convert` read back from its `.mcap`
 //! file (`smocap::archive::export::read_trial_record`, as `smocap export` reads it).
 
-use crate::errors::{to_py, ArchiveError};
+use crate::errors::{to_py, ArchiveError, ModelError, SmocapError};
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -260,6 +260,37 @@ impl Trial {
         let v = PyArray1::from_vec(py, v).reshape([frames, nv, 3])?.into_any();
         let f = PyArray1::from_vec(py, faces).reshape([nf, 3])?.into_any();
         Ok((v, f))
+    }
+
+    /// Retargets the trial onto a humanoid robot as `smocap retarget` does (nothing is
+    /// written): `(q, report)`. `q`: MuJoCo's `qpos` per frame, indexed by frame time (s, as in
+    /// `q`'s index), columns `root_x`, `root_y`, `root_z` (m, Z-up world), `root_qw`, `root_qx`,
+    /// `root_qy`, `root_qz` (the root's orientation), then one per robot joint (rad, MJCF order).
+    /// `report`: the quality report (`<trial>.json` of `smocap retarget`). `robot`: a shipped
+    /// robot (`"g1"`) or a mapping file; `mjcf`: the robot's MJCF when the mapping does not name
+    /// it; `settings`: a TOML file of retargeting settings.
+    #[pyo3(signature = (robot = "g1", mjcf = None, settings = None))]
+    fn retarget<'py>(
+        &self,
+        py: Python<'py>,
+        robot: &str,
+        mjcf: Option<PathBuf>,
+        settings: Option<PathBuf>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        use smocap::cli::robot::RobotSetup;
+        let done = py.detach(|| {
+            let setup = RobotSetup::load(robot, mjcf.as_deref(), settings.as_deref())
+                .map_err(|e| PyErr::new::<ModelError, _>(format!("{e:#}")))?;
+            let take = smocap::render::Take::from_record(&self.rec, &self.path)
+                .map_err(|e| PyErr::new::<ArchiveError, _>(e.to_string()))?;
+            setup.retarget(&take).map_err(|e| PyErr::new::<SmocapError, _>(format!("{}: {e}", self.path.display())))
+        })?;
+        let m = &done.motion;
+        let root = ["root_x", "root_y", "root_z", "root_qw", "root_qx", "root_qy", "root_qz"];
+        let names: Vec<String> = root.iter().map(|s| s.to_string()).chain(m.joint_names.iter().cloned()).collect();
+        let rows: Vec<f64> = m.qpos.iter().flatten().copied().collect();
+        let q = crate::table(py, rows, names, self.time())?;
+        Ok((q, crate::to_python(py, &done.report)?))
     }
 
     fn __len__(&self) -> usize {

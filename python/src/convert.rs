@@ -119,6 +119,7 @@ pub fn convert<'py>(
             backend,
             lanes,
             label_qc: None,
+            hook: None,
         };
         // A status line every `every` while the conversion runs, as the command line prints
         // when stderr is not a terminal.

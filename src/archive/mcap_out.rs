@@ -136,7 +136,7 @@ pub fn world_from_model(up: Option<Vector3<f64>>) -> UnitQuaternion<f64> {
 }
 
 /// A quaternion with w ≥ 0, its components on the [`TF_GRID`] (visualisation only).
-fn quat(r: &UnitQuaternion<f64>) -> proto::Quaternion {
+pub(super) fn quat(r: &UnitQuaternion<f64>) -> proto::Quaternion {
     let s = if r.w < 0.0 { -1.0 } else { 1.0 };
     proto::Quaternion { x: grid(s * r.i), y: grid(s * r.j), z: grid(s * r.k), w: grid(s * r.w) }
 }
@@ -150,7 +150,7 @@ fn grid(x: f64) -> f64 {
     (x / TF_GRID).round() * TF_GRID + 0.0
 }
 
-fn v3(v: &Vector3<f64>) -> proto::Vector3 {
+pub(super) fn v3(v: &Vector3<f64>) -> proto::Vector3 {
     proto::Vector3 { x: grid(v.x), y: grid(v.y), z: grid(v.z) }
 }
 
@@ -375,6 +375,7 @@ impl<'a> TrialWriter<'a> {
                     frame_locked: true,
                     metadata: Vec::new(),
                     spheres,
+                    cylinders: Vec::new(),
                     lines,
                 }
             })

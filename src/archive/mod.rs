@@ -10,6 +10,7 @@ pub mod inspect;
 pub mod lock;
 pub mod mcap_check;
 pub mod mcap_out;
+pub mod mcap_robot;
 pub mod merge;
 pub mod progress;
 pub mod proto;

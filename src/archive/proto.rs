@@ -154,6 +154,22 @@ pub struct SpherePrimitive {
     pub color: Option<Color>,
 }
 
+/// `foxglove.CylinderPrimitive`: along the `pose`'s z axis, `size` its bounding box (m).
+#[derive(Clone, PartialEq, prost::Message)]
+pub struct CylinderPrimitive {
+    #[prost(message, optional, tag = "1")]
+    pub pose: Option<Pose>,
+    #[prost(message, optional, tag = "2")]
+    pub size: Option<Vector3>,
+    /// Diameter of the bottom and top faces as a share of `size` x and y (1: a cylinder).
+    #[prost(double, tag = "3")]
+    pub bottom_scale: f64,
+    #[prost(double, tag = "4")]
+    pub top_scale: f64,
+    #[prost(message, optional, tag = "5")]
+    pub color: Option<Color>,
+}
+
 /// `foxglove.LinePrimitive.Type.LINE_LIST`.
 pub const LINE_LIST: i32 = 2;
 
@@ -200,6 +216,8 @@ pub struct SceneEntity {
     pub metadata: Vec<KeyValuePair>,
     #[prost(message, repeated, tag = "9")]
     pub spheres: Vec<SpherePrimitive>,
+    #[prost(message, repeated, tag = "10")]
+    pub cylinders: Vec<CylinderPrimitive>,
     #[prost(message, repeated, tag = "11")]
     pub lines: Vec<LinePrimitive>,
 }

@@ -81,6 +81,22 @@ pub struct ConvertArgs {
     /// `smocap.run` metadata and the summary.
     #[arg(long, value_enum)]
     pub label_qc: Option<crate::pipeline::input::label_qc::QcMode>,
+    /// Retarget every converted trial onto a robot: a shipped robot (`g1`) or a mapping file
+    /// (`smocap retarget --robot`). Writes `<trial>.<robot>.pkl`, `.csv`, `.npz` and the report
+    /// `.json` beside `<trial>.mcap` and adds `/robot/tf` and `/robot/scene` to it
+    /// (docs/guide/retargeting.md).
+    #[arg(long, value_name = "ROBOT")]
+    pub robot: Option<String>,
+    /// The robot's MJCF, when the `--robot` mapping file does not name it.
+    #[arg(long, requires = "robot", value_name = "MJCF")]
+    pub robot_mjcf: Option<PathBuf>,
+    /// Retargeting settings (TOML, as `smocap retarget --settings`).
+    #[arg(long, requires = "robot", value_name = "TOML")]
+    pub robot_settings: Option<PathBuf>,
+    /// Where the robot stands in the MCAP's `world`: `X,Y` or `X,Y,Z` (m, Z up; default 0,0,0:
+    /// where the human is). Its files are not moved.
+    #[arg(long, requires = "robot", value_parser = super::robot::parse_offset, value_name = "X,Y[,Z]")]
+    pub robot_offset: Option<[f64; 3]>,
 }
 
 fn parse_epoch(s: &str) -> Result<u64, String> {
@@ -106,6 +122,16 @@ pub fn run(a: ConvertArgs) -> anyhow::Result<u8> {
     if let Some(note) = note {
         eprintln!("note: {note}");
     }
+    let writer =
+        WriterOptions { epoch_ns: a.epoch, zstd_level: a.zstd_level, timings: a.timings, ..WriterOptions::default() };
+    let hook = match &a.robot {
+        Some(r) => {
+            let mut setup = super::robot::RobotSetup::load(r, a.robot_mjcf.as_deref(), a.robot_settings.as_deref())?;
+            setup.offset = a.robot_offset.unwrap_or_default().into();
+            Some(Arc::new(super::robot::ConvertHook { setup, writer }) as Arc<dyn crate::archive::convert::TrialHook>)
+        }
+        None => None,
+    };
     let progress = Arc::new(Progress::default());
     let opt = ConvertOptions {
         out: a.out.clone(),
@@ -113,16 +139,12 @@ pub fn run(a: ConvertArgs) -> anyhow::Result<u8> {
         shard,
         resume: a.resume,
         progress: Some(progress.clone()),
-        writer: WriterOptions {
-            epoch_ns: a.epoch,
-            zstd_level: a.zstd_level,
-            timings: a.timings,
-            ..WriterOptions::default()
-        },
+        writer,
         window_frames: a.window_frames,
         backend,
         lanes: a.lanes,
         label_qc: a.label_qc,
+        hook,
     };
     let every = Duration::try_from_secs_f64(a.progress_every)
         .ok()
@@ -146,10 +168,19 @@ pub fn run(a: ConvertArgs) -> anyhow::Result<u8> {
             eprintln!("  {}/{}: {}: {}", t.dataset, t.trial, t.status, t.error.as_deref().unwrap_or(""));
         }
     }
+    let robot_failed = summary.hook_failed();
+    if robot_failed > 0 {
+        eprintln!("{robot_failed} trials converted without their robot:");
+        for (t, r) in
+            summary.trials.iter().filter_map(|t| Some((t, t.robot.as_ref()?))).filter(|(_, r)| r.status == "failed")
+        {
+            eprintln!("  {}/{}: {}", t.dataset, t.trial, r.note);
+        }
+    }
     for d in summary.datasets.iter().filter(|d| d.failed.is_some()) {
         eprintln!("dataset '{}' failed: {}", d.name, d.failed.as_deref().unwrap_or(""));
     }
-    let (ok, bad) = (summary.succeeded(), failed + summary.failed_datasets());
+    let (ok, bad) = (summary.succeeded(), failed + summary.failed_datasets() + robot_failed);
     if ok + bad == 0 {
         eprintln!(
             "{}: no trial found{}",

@@ -22,6 +22,7 @@ mod preview;
 mod project;
 mod render;
 mod retarget;
+pub mod robot;
 mod skin_report;
 mod solve;
 mod synth;

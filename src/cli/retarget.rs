@@ -1,11 +1,10 @@
 //! `smocap retarget`: converted trials onto a humanoid robot (GMR pickle, mjlab CSV, NPZ and a
-//! quality report per trial).
+//! quality report per trial, and the robot's channels in the trial's MCAP file).
 
-use crate::retarget::{self, files, Human, Plan, RetargetSettings};
-use anyhow::Context as _;
+use super::robot::{parse_offset, RobotSetup};
+use crate::archive::mcap_out::WriterOptions;
 use clap::Args;
 use std::path::PathBuf;
-use std::time::Instant;
 
 #[derive(Args, Debug)]
 pub struct RetargetArgs {
@@ -20,8 +19,17 @@ pub struct RetargetArgs {
     #[arg(long)]
     pub mjcf: Option<PathBuf>,
     /// Output folder: `<trial>.pkl`, `<trial>.csv`, `<trial>.npz`, `<trial>.json` per trial.
+    #[arg(long, required_unless_present = "into_mcap")]
+    pub out: Option<PathBuf>,
+    /// Add the robot to each input MCAP file (rewritten in place, atomically): `/robot/tf` (every
+    /// robot body's pose per frame, frames `<robot>/<body>`), `/robot/scene` (its collision
+    /// capsules) and a `smocap.robot` metadata record; a robot added before is replaced.
     #[arg(long)]
-    pub out: PathBuf,
+    pub into_mcap: bool,
+    /// Where the robot stands in the MCAP's `world`: `X,Y` or `X,Y,Z` (m, Z up; default 0,0,0:
+    /// where the human is), e.g. `0,1` beside a human walking along +x. The files are not moved.
+    #[arg(long, value_parser = parse_offset, value_name = "X,Y[,Z]", requires = "into_mcap")]
+    pub robot_offset: Option<[f64; 3]>,
     /// Settings (TOML: `[targets]` and `[solve]` tables of RetargetSettings); default: built in.
     #[arg(long)]
     pub settings: Option<PathBuf>,
@@ -35,43 +43,22 @@ pub struct RetargetArgs {
 }
 
 pub fn run(a: RetargetArgs) -> anyhow::Result<u8> {
-    let (mapping, robot) = retarget::load(&a.robot, a.mjcf.as_deref())?;
-    let settings: RetargetSettings = match &a.settings {
-        Some(p) => toml::from_str(&std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?)
-            .with_context(|| format!("parsing {}", p.display()))?,
-        None => RetargetSettings::default(),
-    };
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let mut setup = RobotSetup::load(&a.robot, a.mjcf.as_deref(), a.settings.as_deref())?;
+    setup.offset = a.robot_offset.unwrap_or_default().into();
+    setup.write_targets = a.targets;
+    if let Some(out) = &a.out {
+        std::fs::create_dir_all(out).map_err(|e| anyhow::anyhow!("creating {}: {e}", out.display()))?;
+    }
+    let writer = WriterOptions::default();
     let mut suspect = false;
     for file in &a.inputs {
-        let rec = crate::archive::export::read_trial_record(file)?;
-        let take = crate::render::Take::from_record(&rec, file)?;
-        let human = Human {
-            model: &take.model,
-            scales: &take.scales,
-            q: &take.q,
-            times: &take.times,
-            world_from_model: take.world_from_model,
-        };
-        let plan = Plan::new(&robot, &mapping, &human)?;
-        let start = Instant::now();
-        let done = retarget::retarget(&human, &robot, &plan, &settings, &take.name);
-        let seconds = start.elapsed().as_secs_f64();
-        let stem = a.out.join(&take.name);
-        files::write_gmr_pickle(&stem.with_extension("pkl"), &done.motion)?;
-        files::write_mjlab_csv(&stem.with_extension("csv"), &done.motion)?;
-        files::write_npz(&stem.with_extension("npz"), &done.motion)?;
-        if a.targets {
-            files::write_targets_npz(&stem.with_extension("targets.npz"), &done.targets)?;
-        }
-        let json = serde_json::to_string_pretty(&done.report)? + "\n";
-        crate::render::png_out::write_atomic(&stem.with_extension("json"), json.as_bytes())?;
-        let r = &done.report;
+        let name = file.file_stem().map_or("trial".into(), |s| s.to_string_lossy().into_owned());
+        let stem = a.out.as_ref().map(|o| o.join(&name));
+        let (r, seconds) = setup.trial(file, stem.as_deref(), a.into_mcap.then_some(&writer))?;
         suspect |= r.status != "ok";
         if !a.quiet {
             eprintln!(
-                "{}: {} {} frames in {:.3} s ({:.0} frames/s), end effectors {:.1} mm median, {}{}",
-                take.name,
+                "{name}: {} {} frames in {:.3} s ({:.0} frames/s), end effectors {:.1} mm median, {}{}",
                 r.robot,
                 r.frames,
                 seconds,

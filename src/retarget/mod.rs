@@ -6,7 +6,8 @@
 //! runs one small QP per frame over the robot's coordinates with hard joint-range and velocity
 //! limits, foot pins, a ground and self-collision rows, warm-started frame to frame; [`report`]
 //! measures the result and [`files`] writes it (GMR pickle, mjlab CSV, NPZ).
-//! Imports `io`, `model`, `kinematics` and `solve`; imported by `cli` only.
+//! [`track`] gives the robot's body poses for the trial's MCAP file ([`crate::archive::mcap_robot`]).
+//! Imports `io`, `model`, `kinematics`, `solve` and `archive`; imported by `cli` only.
 
 pub mod collide;
 pub mod files;
@@ -15,6 +16,7 @@ pub mod report;
 pub mod robot;
 pub mod solve;
 pub mod targets;
+pub mod track;
 
 pub use files::RobotMotion;
 pub use mapping::Mapping;

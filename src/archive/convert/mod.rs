@@ -27,7 +27,7 @@ mod summary;
 
 pub use plan::{inside, output_path};
 pub use solve::batches;
-pub use summary::{ConvertSummary, DatasetNote, SubjectCalibration, TrialOutcome};
+pub use summary::{ConvertSummary, DatasetNote, HookOutcome, SubjectCalibration, TrialOutcome};
 
 use crate::archive::config::Dataset;
 use crate::archive::discover::{SubjectGroup, TrialEntry};
@@ -65,6 +65,35 @@ pub struct ConvertOptions {
     /// Label quality control for every trial (`--label-qc`), over what the datasets' settings
     /// say; `None` keeps theirs (default `repair`).
     pub label_qc: Option<crate::pipeline::input::label_qc::QcMode>,
+    /// Work on each converted trial's complete file after it is written (`--robot`).
+    pub hook: Option<std::sync::Arc<dyn TrialHook>>,
+}
+
+/// Work done on each converted trial's complete MCAP file once it is written, on the worker
+/// that wrote it (`smocap convert --robot`: retargeting, which `cli` fills in; this layer knows
+/// nothing of robots). Its outputs must be complete or absent whenever [`TrialHook::run`]
+/// returns. Resuming, a trial already converted whose hook outputs are not [`TrialHook::done`]
+/// gets the hook run again.
+pub trait TrialHook: Send + Sync {
+    /// Whether the hook's outputs for the trial file `mcap` are complete.
+    fn done(&self, mcap: &Path) -> bool;
+    /// Runs on the complete trial file `mcap`: what it gave, or why it failed.
+    fn run(&self, mcap: &Path) -> Result<HookOutcome, String>;
+}
+
+impl std::fmt::Debug for dyn TrialHook {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("TrialHook")
+    }
+}
+
+/// The hook's outcome for a converted trial (`skipped`: done by an earlier run, resuming).
+fn hook_outcome(opt: &ConvertOptions, out: &Path, resumed: bool) -> Option<HookOutcome> {
+    let hook = opt.hook.as_ref()?;
+    if resumed && hook.done(out) {
+        return Some(HookOutcome { status: "skipped".into(), note: String::new() });
+    }
+    Some(hook.run(out).unwrap_or_else(|why| HookOutcome { status: "failed".into(), note: why }))
 }
 
 /// Trials solved together at most: each holds a writer thread (its 1 MiB chunk and zstd
@@ -115,12 +144,14 @@ pub fn convert(
             p.finished(&format!("{}/{}", t.dataset, t.trial), t.status == "failed" || t.status == "suspect", solved);
             p.solved_for(t.solve_s);
         }
+        let robot = t.robot.as_ref().filter(|r| r.status != "skipped");
         let what = match (&t.status[..], &t.error) {
             ("failed", Some(e)) => format!("failed: {e}"),
             ("suspect", Some(e)) => format!("suspect ({} frames, {:.2} s): {e}", t.frames, t.solve_s),
             (st, _) => format!("{st} ({} frames, {:.2} s)", t.frames, t.solve_s),
         };
-        log(&format!("[{k}/{total}] {}/{}: {what}", t.dataset, t.trial));
+        let robot = robot.map_or(String::new(), |r| format!("; robot {}: {}", r.status, r.note));
+        log(&format!("[{k}/{total}] {}/{}: {what}{robot}", t.dataset, t.trial));
         for u in &t.unfittable {
             log(&format!("  warning: {}/{}: {}", t.dataset, t.trial, u.why));
         }
@@ -176,6 +207,7 @@ fn outcome(
         label_qc: Vec::new(),
         unfittable: Vec::new(),
         reason: None,
+        robot: None,
     }
 }
 

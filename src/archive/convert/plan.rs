@@ -144,7 +144,8 @@ pub(super) fn pending<'g>(
                             Some("suspect") => ("suspect", run.get("verdict_reason").cloned()),
                             _ => ("skipped", None),
                         };
-                        outcomes.push(outcome(d, g, t, &out, status, why));
+                        let robot = super::hook_outcome(opt, &out, true);
+                        outcomes.push(TrialOutcome { robot, ..outcome(d, g, t, &out, status, why) });
                     }
                     None => todo.push((t, out, h)),
                 }

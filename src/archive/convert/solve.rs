@@ -129,16 +129,22 @@ fn batched(
         let solver = Solver { threads: opt.jobs, lanes, backend: backend.as_mut().map(|(b, _)| &mut **b as _) };
         let progress = opt.progress.as_deref().map(|p| &p.frames_done);
         let results = solve_and_write_all(&jobs, cal, &opt.writer, progress, solver);
-        for ((t, out, ..), r) in opened.iter().zip(results) {
-            let o = trial_outcome(d, g, t, out, r, &summary);
-            report(&o);
-            outcomes.push(o);
-        }
+        // Each trial's hook (its robot) on the pool, as trials are on the CPU path.
+        let done: Vec<TrialOutcome> = opened
+            .par_iter()
+            .zip(results)
+            .map(|((t, out, ..), r)| {
+                let o = trial_outcome(d, g, t, out, r, &summary, opt);
+                report(&o);
+                o
+            })
+            .collect();
+        outcomes.extend(done);
     }
     outcomes
 }
 
-/// A converted trial's outcome.
+/// A converted trial's outcome, after the run's hook ([`super::TrialHook`]) ran on its file.
 fn trial_outcome(
     d: &Dataset,
     g: &SubjectGroup,
@@ -146,6 +152,7 @@ fn trial_outcome(
     out: &Path,
     r: Result<crate::archive::trial_job::Solved, String>,
     backend: &str,
+    opt: &ConvertOptions,
 ) -> TrialOutcome {
     match r {
         Ok(s) => TrialOutcome {
@@ -158,6 +165,7 @@ fn trial_outcome(
             label_qc: s.label_qc.clone(),
             unfittable: s.unfittable.clone(),
             reason: s.reason.clone(),
+            robot: super::hook_outcome(opt, out, false),
             ..outcome(d, g, t, out, if s.suspect.is_some() { "suspect" } else { "ok" }, s.suspect.clone())
         },
         Err(e) => failed(d, g, t, out, e),
@@ -215,7 +223,7 @@ fn solve_one(
     };
     let run = run_info(d, g, t, hash, cal, trial.get(), opt, ("cpu", "cpu"));
     let r = solve_and_write(out, &t.rel, trial.get(), cal, &run, writer, progress.map(|p| &p.frames_done));
-    trial_outcome(d, g, t, out, r, "cpu")
+    trial_outcome(d, g, t, out, r, "cpu", opt)
 }
 
 /// The `smocap.run` metadata of a trial solved on `backend` (name, device).

@@ -40,6 +40,20 @@ pub struct TrialOutcome {
     /// blamed on the data (the trial is not `failed` for them).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
+    /// What the post-trial hook (`--robot`: the robot's files and MCAP channels) did with the
+    /// converted trial; absent without one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot: Option<HookOutcome>,
+}
+
+/// A post-trial hook's outcome ([`super::TrialHook`]).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct HookOutcome {
+    /// `ok`, `suspect` (written, but see `note`), `failed` (nothing written: see `note`) or
+    /// `skipped` (done by an earlier run, `--resume`).
+    pub status: String,
+    /// One line: what was written, or why not.
+    pub note: String,
 }
 
 /// A dataset's fate (skipped ones say why: its root is absent; failed ones too: a bad glob, a
@@ -151,7 +165,28 @@ impl ConvertSummary {
                 med(|t| t.rmse_mm),
             );
         }
-        s + &self.unfittable_line() + &self.throughput()
+        s + &self.unfittable_line() + &self.hook_line() + &self.throughput()
+    }
+
+    /// Trials whose post-trial hook (`--robot`) failed (their robot outputs are absent).
+    pub fn hook_failed(&self) -> usize {
+        self.trials.iter().filter(|t| t.robot.as_ref().is_some_and(|r| r.status == "failed")).count()
+    }
+
+    /// The post-trial hook's outcomes counted by status, when there was a hook.
+    pub fn hook_line(&self) -> String {
+        let all: Vec<&HookOutcome> = self.trials.iter().filter_map(|t| t.robot.as_ref()).collect();
+        if all.is_empty() {
+            return String::new();
+        }
+        let n = |st: &str| all.iter().filter(|r| r.status == st).count();
+        format!(
+            "robot: {} ok, {} suspect, {} failed, {} skipped (the trials' `robot` in the report)\n",
+            n("ok"),
+            n("suspect"),
+            n("failed"),
+            n("skipped")
+        )
     }
 
     /// The runs of unfittable frames over the trials, when there are any: how many, in how many
