@@ -138,13 +138,13 @@ def main():
     folder = Path(sys.argv[1])
     loaders = {".pkl": load_pkl, ".npz": load_npz, ".csv": load_csv}
     stems, problems = {}, []
-    for path in sorted(folder.iterdir()):
-        if path.suffix not in loaders:
+    for path in sorted(folder.rglob("*")):  # every folder below (a convert --robot tree too)
+        if path.suffix not in loaders or path.name.endswith(".targets.npz"):
             continue
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("error")
-                stems.setdefault(path.stem, {})[path.suffix] = loaders[path.suffix](path)
+                stems.setdefault(str(path.with_suffix("")), {})[path.suffix] = loaders[path.suffix](path)
             print(f"ok {path.name}")
         except Exception as e:  # any failure to load is a problem of the file
             problems.append(f"{path.name}: {type(e).__name__}: {e}")

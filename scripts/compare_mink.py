@@ -95,7 +95,7 @@ def measure(model, qpos, t, vlim):
     errs, foot_xy, lowest, collide = [], [], [], 0
     for f in range(len(qpos)):
         data.qpos[:] = qpos[f]
-        mujoco.mj_kinematics(model, data)
+        mujoco.mj_fwdPosition(model, data)  # kinematics, then collision (mj_collision alone misses pairs)
         errs += [np.linalg.norm(data.xpos[body(names[k])] - t["pos"][f, k]) for k in eff]
         foot_xy.append([data.xpos[b][:2].copy() for b in feet])
         low = np.inf
@@ -103,7 +103,6 @@ def measure(model, qpos, t, vlim):
             axis = data.geom_xmat[g].reshape(3, 3)[:, 2] * model.geom_size[g][1]
             low = min(low, data.geom_xpos[g][2] - abs(axis[2]) - model.geom_size[g][0])
         lowest.append(low)
-        mujoco.mj_collision(model, data)
         collide += int(any(data.contact[c].dist < 0 for c in range(data.ncon)))
     foot_xy, c = np.array(foot_xy), t["contact"] > 0.5
     slides = []

@@ -158,23 +158,13 @@ impl<'a> Solver<'a> {
         pins: &[Option<Pin>],
     ) -> usize {
         let iterations = if prev.is_some() { self.settings.iterations } else { self.settings.first_iterations };
-        let mut used = 0;
         self.sticky.fill(false);
-        for _ in 0..iterations {
-            used += 1;
-            self.forward(q);
-            self.assemble(t, i, q, prev, pins);
-            self.dx.fill(0.0);
-            let problem = QpProblem { h: &self.h, g: &self.g, lb: &self.lb, ub: &self.ub };
-            if self.qp.solve(&problem, &mut self.dx).is_err() {
-                break;
-            }
-            for (qj, d) in q.iter_mut().zip(self.dx.iter()) {
-                *qj += d;
-            }
-            if self.dx.amax() < self.settings.tolerance {
-                break;
-            }
+        let mut used = self.iterate(t, i, q, prev, pins, iterations, 1.0);
+        self.forward(q);
+        if self.closest_pair() < 0.0 {
+            // Still overlapping where the penalty balanced the tasks: the collision rows a
+            // hundred times stiffer for as many iterations again.
+            used += self.iterate(t, i, q, prev, pins, iterations, 100.0);
         }
         self.forward(q);
         let lift = self.lowest_sole().min(0.0);
@@ -199,6 +189,41 @@ impl<'a> Solver<'a> {
             best = best.min(capsule_distance((&ei.0, &ei.1, ci.radius), (&ej.0, &ej.1, cj.radius)).0);
         }
         best
+    }
+
+    /// Up to `n` Gauss–Newton iterations (collision weight × `stiffer`); the iterations used.
+    #[allow(clippy::too_many_arguments)]
+    fn iterate(
+        &mut self,
+        t: &Targets,
+        i: usize,
+        q: &mut [f64],
+        prev: Option<(&[f64], f64)>,
+        pins: &[Option<Pin>],
+        n: usize,
+        stiffer: f64,
+    ) -> usize {
+        let base = self.settings.collision;
+        self.settings.collision = base * stiffer;
+        let mut used = 0;
+        for _ in 0..n {
+            used += 1;
+            self.forward(q);
+            self.assemble(t, i, q, prev, pins);
+            self.dx.fill(0.0);
+            let problem = QpProblem { h: &self.h, g: &self.g, lb: &self.lb, ub: &self.ub };
+            if self.qp.solve(&problem, &mut self.dx).is_err() {
+                break;
+            }
+            for (qj, d) in q.iter_mut().zip(self.dx.iter()) {
+                *qj += d;
+            }
+            if self.dx.amax() < self.settings.tolerance {
+                break;
+            }
+        }
+        self.settings.collision = base;
+        used
     }
 
     /// Lowest point of any planted-capable foot's capsules above the ground (m).
