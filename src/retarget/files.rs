@@ -254,19 +254,27 @@ pub struct TargetRecord {
     /// Per frame, per task: target position (m, world) and orientation (row-major 3×3, world).
     pub pos: Vec<Vec<[f64; 3]>>,
     pub rot: Vec<Vec<[f64; 9]>>,
+    /// Per frame, per task: the human joint centre it comes from (m, world, unscaled).
+    pub human: Vec<Vec<[f64; 3]>>,
     /// The feet's robot bodies and, per frame, whether each is planted (1) or not (0).
     pub feet: Vec<String>,
     pub contact: Vec<Vec<f64>>,
 }
 
 /// Writes `t` as an NPZ: `fps` (), `robot_bodies`/`human_bodies` (tasks,) `<U…`, `weights`
-/// (tasks, 2), `pos` (F, tasks, 3), `rot` (F, tasks, 3, 3), `feet` (feet,) `<U…`, `contact`
-/// (F, feet) float64.
+/// (tasks, 2), `pos` (F, tasks, 3), `rot` (F, tasks, 3, 3), `human` (F, tasks, 3), `feet`
+/// (feet,) `<U…`, `contact` (F, feet) float64.
 pub fn write_targets_npz(path: &Path, t: &TargetRecord) -> Result<(), FilesError> {
     let (f, n, nf) = (t.pos.len(), t.robot_bodies.len(), t.feet.len());
     let bad = |what: &str| Err(FilesError::Motion { file: path.display().to_string(), what: what.into() });
-    let rows_ok = t.pos.iter().all(|r| r.len() == n) && t.rot.iter().all(|r| r.len() == n);
-    if t.rot.len() != f || t.contact.len() != f || !rows_ok || t.contact.iter().any(|c| c.len() != nf) {
+    let rows_ok =
+        [&t.pos, &t.human].iter().all(|v| v.iter().all(|r| r.len() == n)) && t.rot.iter().all(|r| r.len() == n);
+    if t.rot.len() != f
+        || t.human.len() != f
+        || t.contact.len() != f
+        || !rows_ok
+        || t.contact.iter().any(|c| c.len() != nf)
+    {
         return bad("targets: frames or tasks disagree");
     }
     let entries = [
@@ -276,6 +284,7 @@ pub fn write_targets_npz(path: &Path, t: &TargetRecord) -> Result<(), FilesError
         ("weights.npy", npy_f64(&[n, 2], t.weights.iter().flatten().copied())),
         ("pos.npy", npy_f64(&[f, n, 3], t.pos.iter().flatten().flatten().copied())),
         ("rot.npy", npy_f64(&[f, n, 3, 3], t.rot.iter().flatten().flatten().copied())),
+        ("human.npy", npy_f64(&[f, n, 3], t.human.iter().flatten().flatten().copied())),
         ("feet.npy", npy_str(&t.feet)),
         ("contact.npy", npy_f64(&[f, nf], t.contact.iter().flatten().copied())),
     ];

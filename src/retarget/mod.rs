@@ -69,6 +69,7 @@ fn target_record(robot: &Robot, plan: &Plan, human: &Human, t: &targets::Targets
         weights: plan.tasks.iter().map(|k| [k.w_pos, k.w_rot]).collect(),
         pos: t.pos.iter().map(|f| f.iter().map(|p| [p.x, p.y, p.z]).collect()).collect(),
         rot: t.rot.iter().map(|f| f.iter().map(|r| std::array::from_fn(|i| r[(i / 3, i % 3)])).collect()).collect(),
+        human: t.human.iter().map(|f| f.iter().map(|p| [p.x, p.y, p.z]).collect()).collect(),
         feet: plan.feet.iter().map(|f| body(f.robot_body)).collect(),
         contact: t.contact.iter().map(|c| c.iter().map(|&b| f64::from(u8::from(b))).collect()).collect(),
     }

@@ -114,6 +114,8 @@ pub struct Targets {
     /// Per frame, per task: world position (m) and orientation.
     pub pos: Vec<Vec<Vector3<f64>>>,
     pub rot: Vec<Vec<Matrix3<f64>>>,
+    /// Per frame, per task: the human joint centre (world, m, unscaled).
+    pub human: Vec<Vec<Vector3<f64>>>,
     /// Per frame, per foot: planted.
     pub contact: Vec<Vec<bool>>,
 }
@@ -274,6 +276,7 @@ impl Plan {
                 pos.push(p);
             }
             t.pos.push(pos);
+            t.human.push(self.tasks.iter().map(|task| c[task.human_body]).collect());
             t.rot.push(self.tasks.iter().map(|task| r[task.human_body] * task.rot_offset).collect());
         }
         let mut contact = vec![vec![false; self.feet.len()]; n];
