@@ -1,14 +1,16 @@
 #!/usr/bin/env python3
 """Draws docs/retarget.png: the subject and the Unitree G1 at a few frames of a retargeted trial.
 
-A side view (x forward, z up, equal aspect), one figure per chosen frame laid out along a strip:
-the subject as a stick figure through the joint centres `smocap retarget --targets` records
-(grey; pelvis, hip, knee, ankle = talus, heel = calcn; lumbar joint = torso, shoulder, elbow,
-hand; the head is only notional, a circle above the shoulders), and the G1 posed by MuJoCo from the retargeted `qpos` (blue; its collision capsules and
-spheres, over a light silhouette of its visual meshes' vertices). The far side (left) is drawn
-in a darker shade behind the near side (right). Each subject is shifted along x so that its
-pelvis is over the robot's: the subject walks further, its steps being longer. A small marker on
-the ground line shows each foot that `--targets` marks as planted.
+A side view (x forward, z up, equal aspect, seen from the right), one pair of figures per chosen
+frame laid out along a strip: on the left the subject, a stick figure through the joint centres
+`smocap retarget --targets` records (grey; pelvis, hip, knee, ankle = talus, heel = calcn;
+lumbar joint = torso, shoulder, elbow, hand; the head is only notional, a circle above the
+shoulders), and on its right the G1 posed by MuJoCo from the retargeted `qpos` (blue; its
+collision capsules and spheres, over a light silhouette of its visual meshes' vertices). The far
+side (left) is drawn darker, behind the near side (right). Each figure is moved along x to its
+place in the strip (the subject walks further than the robot, its steps being longer); heights
+are kept. A small marker on the ground line, under the subject's heel and under the robot's foot,
+shows each foot that `--targets` marks as planted.
 
 Needs numpy, matplotlib and mujoco. How to regenerate the README picture (from the repository
 root, the shared data at ../shared):
@@ -133,11 +135,11 @@ def main():
     foot_ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f) for f in FEET]
 
     width = args.spacing * len(frames)
-    lo, hi = -0.5 * args.spacing - args.gap / 2, width - 0.5 * args.spacing - args.gap / 2
+    lo, hi = -0.5 * args.spacing - 0.05, width - 0.5 * args.spacing + 0.05
     zlo, zhi = -0.28, 1.95
-    px_per_m = 1300.0 / (hi - lo) if len(frames) > 3 else 180.0
-    fig = plt.figure(figsize=((hi - lo) * px_per_m / 100 / 0.98, (zhi - zlo) * px_per_m / 100 / 0.8),
-                     dpi=100)
+    px_per_m = min(1370.0 / (hi - lo), 180.0)
+    size = ((hi - lo) * px_per_m / 100 / 0.98, (zhi - zlo) * px_per_m / 100 / 0.8)
+    fig = plt.figure(figsize=size, dpi=100)
     ax = fig.add_axes([0.01, 0.03, 0.98, 0.8])
     ax.set_aspect("equal")
     ax.axis("off")
@@ -185,7 +187,7 @@ def main():
         ax.add_collection(PatchCollection(patches, facecolors=colours, edgecolors="white",
                                           linewidths=0.4, alpha=0.95, zorder=5))
 
-        # Planted feet (the flags come from the subject's feet): under the heel and the robot's foot.
+        # Planted feet (flags from the subject's feet): under the heel and under the robot's foot.
         for i, (fid, side) in enumerate(zip(foot_ids, ("l", "r"))):
             if contact[f, i] > 0.5:
                 heel = human[f, hidx["calcn_" + side], 0] + hx
@@ -194,6 +196,11 @@ def main():
                 ax.plot(data.xpos[fid, 0] + dx, -0.03, "^", ms=7, color=ROBOT_COLOUR[side],
                         mec="white", mew=0.6, zorder=6)
 
+        if k == 0:
+            ax.text(centre - args.gap / 2, 1.86, "subject", ha="center", va="bottom",
+                    fontsize=9.5, color="#555555", style="italic")
+            ax.text(centre + args.gap / 2, 1.45, "G1", ha="center", va="bottom", fontsize=9.5,
+                    color=ROBOT_COLOUR["l"], style="italic")
         ax.text(centre, -0.12, f"frame {f}  ·  {f / fps:.2f} s", ha="center", va="top",
                 fontsize=10, color="#444444")
 

@@ -14,10 +14,10 @@
 //! the reference postures.
 //! Orientations: `R_target_b = R_h_b(t) O_b`, `O_b = R_h_b(ref)ᵀ R_r_b(ref)` (both in world):
 //! the offset that makes the two reference postures agree.
-//! A foot is planted when its heel or its toe joint centre is within
-//! [`TargetSettings::contact_height`] of its standing height and slower than
-//! [`TargetSettings::contact_speed`] (heel strike to toe off), for at least
-//! [`TargetSettings::contact_frames`] frames.
+//! A foot is planted when its heel joint centre is within [`TargetSettings::contact_height`] of
+//! its standing height and slower than [`TargetSettings::contact_speed`], and its toe joint centre
+//! is down too (within the same height): the foot is flat, from foot flat to heel off, as the
+//! robot's pinned foot is; for at least [`TargetSettings::contact_frames`] frames.
 
 use super::mapping::Mapping;
 use super::robot::Robot;
@@ -47,7 +47,7 @@ pub struct Human<'a> {
 pub struct TargetSettings {
     /// Heel and toe within this height (m) of their standing heights.
     pub contact_height: f64,
-    /// Heel and toe slower than this (m/s).
+    /// The heel slower than this (m/s).
     pub contact_speed: f64,
     /// Shortest contact kept (frames).
     pub contact_frames: usize,
@@ -296,8 +296,9 @@ impl Plan {
                     let c = &frames[i].0;
                     let heel =
                         c[f.heel].z - heel0 < settings.contact_height && speed(i, f.heel) < settings.contact_speed;
-                    let toe = c[f.toe].z - toe0 < settings.contact_height && speed(i, f.toe) < settings.contact_speed;
-                    heel && (toe || true)
+                    // The toe down too: the foot is flat (from foot flat to heel off), as the
+                    // robot's pinned foot is.
+                    heel && c[f.toe].z - toe0 < settings.contact_height
                 })
                 .collect();
             for (i, v) in keep_runs(&raw, settings.contact_frames).into_iter().enumerate() {
