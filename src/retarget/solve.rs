@@ -289,39 +289,33 @@ impl<'a> Solver<'a> {
 
     /// `w |J_p Δ − e|²` with the Jacobian in `jp`.
     fn add_position(&mut self, w: f64, e: &Vector3<f64>) {
-        for (ia, &a) in self.cols.iter().enumerate() {
-            self.g[a] -= w * self.jp[a].dot(e);
-            for &b in &self.cols[ia..] {
-                let v = w * self.jp[a].dot(&self.jp[b]);
-                self.h[(a, b)] += v;
-                if a != b {
-                    self.h[(b, a)] += v;
-                }
-            }
-        }
+        self.add_rows(w, e, Rows::Position);
     }
 
     /// `w |J_ω Δ − e|²` with the Jacobian in `jr`.
     fn add_rotation(&mut self, w: f64, e: &Vector3<f64>) {
-        for (ia, &a) in self.cols.iter().enumerate() {
-            self.g[a] -= w * self.jr[a].dot(e);
-            for &b in &self.cols[ia..] {
-                let v = w * self.jr[a].dot(&self.jr[b]);
-                self.h[(a, b)] += v;
-                if a != b {
-                    self.h[(b, a)] += v;
-                }
-            }
-        }
+        self.add_rows(w, e, Rows::Rotation);
     }
 
-    /// `w (Σ_j v_j Δ_j − e)²` for the row `v_j = n · jp[j]` over `cols`.
+    /// `w (Σ_j (n · jp[j]) Δ_j − e)²`: the point's motion along `n`.
     fn add_row(&mut self, w: f64, n: &Vector3<f64>, e: f64) {
-        for (ia, &a) in self.cols.iter().enumerate() {
-            let va = n.dot(&self.jp[a]);
-            self.g[a] -= w * va * e;
-            for &b in &self.cols[ia..] {
-                let v = w * va * n.dot(&self.jp[b]);
+        self.add_rows(w, &Vector3::new(e, 0.0, 0.0), Rows::Along(*n));
+    }
+
+    /// `H += w JᵀJ`, `g −= w Jᵀe` over the columns in `cols`, `J`'s column `j` as `rows` picks it.
+    fn add_rows(&mut self, w: f64, e: &Vector3<f64>, rows: Rows) {
+        let col = |s: &Self, j: usize| match rows {
+            Rows::Position => s.jp[j],
+            Rows::Rotation => s.jr[j],
+            Rows::Along(n) => Vector3::new(n.dot(&s.jp[j]), 0.0, 0.0),
+        };
+        for ia in 0..self.cols.len() {
+            let a = self.cols[ia];
+            let ja = col(self, a);
+            self.g[a] -= w * ja.dot(e);
+            for ib in ia..self.cols.len() {
+                let b = self.cols[ib];
+                let v = w * ja.dot(&col(self, b));
                 self.h[(a, b)] += v;
                 if a != b {
                     self.h[(b, a)] += v;
@@ -400,6 +394,15 @@ impl<'a> Solver<'a> {
             self.ub[j] = hi - q[j];
         }
     }
+}
+
+/// Which rows of a point's Jacobian a least-squares term uses.
+#[derive(Clone, Copy)]
+enum Rows {
+    Position,
+    Rotation,
+    /// The position rows projected on a direction: one row.
+    Along(Vector3<f64>),
 }
 
 /// Per body, the coordinate-driven motions of its chain (root first).
