@@ -294,15 +294,16 @@ class Trial:
         robot: str = "g1",
         mjcf: Optional[_PathLike] = None,
         settings: Optional[_PathLike] = None,
-    ) -> Tuple[pd.DataFrame, Dict[str, Any]]:
+    ) -> pd.DataFrame:
         """Retargets the trial onto a humanoid robot as ``smocap retarget`` does (nothing is
-        written): ``(q, report)``.
+        written): a DataFrame ``q`` of the robot's joint angles, with the report in
+        ``q.attrs["report"]``.
 
         ``q``: MuJoCo's ``qpos`` per frame, index ``time_s`` (as :attr:`q`'s), columns
         ``root_x``, ``root_y``, ``root_z`` (m, Z-up world), ``root_qw``, ``root_qx``, ``root_qy``,
         ``root_qz`` (root orientation, w first as MuJoCo), then one per robot joint (rad, MJCF
         order; ``q.iloc[:, 7:]`` are the joint angles, ``q.to_numpy()`` the ``qpos`` array).
-        ``report``: the quality report as ``smocap retarget`` writes it (``status``,
+        ``q.attrs["report"]``: the quality report as ``smocap retarget`` writes it (``status``,
         ``reasons``, ``end_effector_median_mm``, ``tracking``, ``feet``, ``range_violations``...).
 
         ``robot`` is a shipped robot (``"g1"``, the Unitree G1) or a mapping file (TOML, or GMR's

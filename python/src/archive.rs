@@ -276,7 +276,7 @@ impl Trial {
         robot: &str,
         mjcf: Option<PathBuf>,
         settings: Option<PathBuf>,
-    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    ) -> PyResult<Bound<'py, PyAny>> {
         use smocap::cli::robot::RobotSetup;
         let done = py.detach(|| {
             let setup = RobotSetup::load(robot, mjcf.as_deref(), settings.as_deref())
@@ -290,7 +290,8 @@ impl Trial {
         let names: Vec<String> = root.iter().map(|s| s.to_string()).chain(m.joint_names.iter().cloned()).collect();
         let rows: Vec<f64> = m.qpos.iter().flatten().copied().collect();
         let q = crate::table(py, rows, names, self.time())?;
-        Ok((q, crate::to_python(py, &done.report)?))
+        q.getattr("attrs")?.set_item("report", crate::to_python(py, &done.report)?)?;
+        Ok(q)
     }
 
     fn __len__(&self) -> usize {
