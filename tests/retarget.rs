@@ -173,6 +173,11 @@ fn synthetic_walks_retarget_within_the_robots_limits_and_the_same_bytes_every_ru
         assert_eq!(r.frames, 120);
     }
     retargeted(&trials, &dir.join("b"));
+    // Two trials of one name into one folder: refused, nothing overwritten.
+    let both: Vec<&str> = trials.iter().map(|t| t.to_str().unwrap()).collect();
+    let o = smocap(&["retarget", both[0], both[1], "--out", dir.join("c").to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("would both write walk01.*"));
     for f in walk(&dir.join("a")) {
         let other = dir.join("b").join(f.strip_prefix(dir.join("a")).unwrap());
         assert_eq!(std::fs::read(&f).unwrap(), std::fs::read(&other).unwrap(), "{} differs between runs", f.display());

@@ -49,6 +49,21 @@ pub fn run(a: RetargetArgs) -> anyhow::Result<u8> {
     if let Some(out) = &a.out {
         std::fs::create_dir_all(out).map_err(|e| anyhow::anyhow!("creating {}: {e}", out.display()))?;
     }
+    if a.out.is_some() {
+        // One folder takes one trial of each name: refuse rather than overwrite.
+        let mut seen = std::collections::BTreeMap::new();
+        for f in &a.inputs {
+            if let Some(other) = seen.insert(f.file_stem(), f) {
+                anyhow::bail!(
+                    "{} and {} would both write {}.* into --out: retarget them into separate folders, or \
+                     use `smocap convert --robot` (files beside each trial)",
+                    other.display(),
+                    f.display(),
+                    f.file_stem().unwrap_or_default().to_string_lossy()
+                );
+            }
+        }
+    }
     let writer = WriterOptions::default();
     let mut suspect = false;
     for file in &a.inputs {
