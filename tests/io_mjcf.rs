@@ -458,3 +458,28 @@ fn shipped_fullbody_model_imports_with_documented_counts() {
     let pelvis = m.coordinates.iter().find(|c| c.name == "pelvis_tz").expect("pelvis_tz");
     assert!(!pelvis.clamped && pelvis.kind == CoordinateKind::Translational);
 }
+
+#[test]
+fn colliding_geoms_are_read_and_the_shipped_models_give_no_warning() {
+    let xml = "<mujoco><default><default class='c'><geom type='capsule' size='0.02'/></default></default>\
+        <worldbody><body name='a'><geom class='c' fromto='0 0 0 0 0 -0.3'/><geom type='sphere' size='0.05' pos='0 0 0.1'/>\
+        <geom type='capsule' size='0.01 0.2' euler='90 0 0'/><geom type='box' size='1 1 1'/>\
+        <geom type='sphere' size='1' contype='0' conaffinity='0'/><geom type='capsule'/></body></worldbody>\
+        <contact><exclude body1='a' body2='a'/></contact></mujoco>";
+    let d = smocap::io::mjcf::parse_mjcf_document(xml, "t.xml").unwrap();
+    use smocap::io::mjcf::GeomShape;
+    assert_eq!(d.geoms.len(), 5, "the non-colliding sphere is left out");
+    assert!(matches!(d.geoms[0].shape, GeomShape::Capsule { radius, .. } if radius == 0.02));
+    assert!(matches!(d.geoms[1].shape, GeomShape::Sphere { radius, .. } if radius == 0.05));
+    // euler 90° about x turns the capsule's z axis onto −y: ends at ∓0.2 along y.
+    let GeomShape::Capsule { a, b, .. } = &d.geoms[2].shape else { panic!() };
+    assert!((a.y - 0.2).abs() < 1e-12 && (b.y + 0.2).abs() < 1e-12, "{a:?} {b:?}");
+    assert_eq!(d.geoms[3].shape, GeomShape::Other("box".into()));
+    assert!(matches!(&d.geoms[4].shape, GeomShape::Other(s) if s.contains("without a usable size")));
+    assert_eq!(d.excludes, vec![("a".to_string(), "a".to_string())]);
+    assert_eq!(d.warnings.len(), 1, "{:?}", d.warnings);
+    for model in ["models/fullbody.xml", "models/dog.xml"] {
+        let (_, w) = read_mjcf(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(model)).unwrap();
+        assert!(w.is_empty(), "{model}: {w:?}");
+    }
+}

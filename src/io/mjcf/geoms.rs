@@ -67,30 +67,33 @@ impl<'a> Builder<'a> {
         Ok(())
     }
 
-    fn geom_shape(&self, node: roxmltree::Node<'a, 'a>, a: &Attrs<'a>) -> Result<GeomShape, MjcfError> {
+    /// The geom's shape; one this reader cannot interpret (no radius, a malformed `fromto`) is
+    /// [`GeomShape::Other`] with a warning, never an error: geoms do not change the kinematics.
+    fn geom_shape(&mut self, node: roxmltree::Node<'a, 'a>, a: &Attrs<'a>) -> Result<GeomShape, MjcfError> {
         let kind = a.get("type").map_or("sphere", |v| v.1);
         let size = a.get("size").and_then(|(_, v)| super::attrs::parse_numbers(v)).unwrap_or_default();
         let radius = size.first().copied().unwrap_or(0.0);
-        let bad = |what: &str| self.ctx.err_at(a.pos("size", node), "geom", format!("{kind}: {what}"));
-        if (radius.is_nan() || radius <= 0.0) && matches!(kind, "sphere" | "capsule") {
-            return Err(bad("needs size[0] > 0 (the radius)"));
-        }
-        let pos = self.ctx.vec3(node, a, "pos")?.unwrap_or_default();
-        match kind {
-            "sphere" => Ok(GeomShape::Sphere { centre: pos, radius }),
-            "capsule" => match self.ctx.nums::<6>(node, a, "fromto")? {
-                Some(f) => Ok(GeomShape::Capsule {
+        let pos = self.ctx.vec3(node, a, "pos").ok().flatten().unwrap_or_default();
+        let shape = match kind {
+            _ if matches!(kind, "sphere" | "capsule") && (radius.is_nan() || radius <= 0.0) => None,
+            "sphere" => Some(GeomShape::Sphere { centre: pos, radius }),
+            "capsule" => match (self.ctx.nums::<6>(node, a, "fromto"), size.get(1)) {
+                (Ok(Some(f)), _) => Some(GeomShape::Capsule {
                     a: Vector3::new(f[0], f[1], f[2]),
                     b: Vector3::new(f[3], f[4], f[5]),
                     radius,
                 }),
-                None => {
-                    let half = *size.get(1).ok_or_else(|| bad("needs size[1] (the half-length) without fromto"))?;
-                    let axis = self.ctx.orientation(node, a)? * Vector3::z();
-                    Ok(GeomShape::Capsule { a: pos - axis * half, b: pos + axis * half, radius })
-                }
+                (Ok(None), Some(&half)) => self.ctx.orientation(node, a).ok().map(|r| {
+                    let axis = r * Vector3::z();
+                    GeomShape::Capsule { a: pos - axis * half, b: pos + axis * half, radius }
+                }),
+                _ => None,
             },
-            other => Ok(GeomShape::Other(other.to_string())),
-        }
+            other => Some(GeomShape::Other(other.to_string())),
+        };
+        Ok(shape.unwrap_or_else(|| {
+            self.ctx.warn(node, &format!("{kind} geom without a usable size or fromto: not a collider here"));
+            GeomShape::Other(format!("{kind} without a usable size"))
+        }))
     }
 }
