@@ -11,7 +11,9 @@ For every `<trial>.npz` in OUT_DIR (qpos, body_names, body_pos_w, fps):
     filter and <exclude> pairs; the model has no floor) finds no robot geom pair penetrating
     deeper than --max-penetration metres (1 µm default: any overlap);
   - the lowest point of the foot geoms (MuJoCo's geom_xpos of the foot capsules) is not below
-    the ground by more than 1 cm.
+    the ground by more than 1 cm;
+  - the `<trial>.csv` beside it (mjlab's 30 fps rows: root xyz, quaternion xyzw, joints) loads
+    into MuJoCo's qpos with every joint within its range and a unit root quaternion.
 Exit status 1 on any failure. Needs `mujoco` and `numpy`; g1.xml needs its meshes
 (`python scripts/fetch_g1.py --meshes`).
 """
@@ -69,6 +71,23 @@ def check(model, path, max_fk, max_pen):
           f"(report: {said}), lowest foot point {lowest * 1e3:.1f} mm")
     if lowest < -0.01:
         problems.append(f"a foot goes {-lowest * 1e3:.1f} mm below the ground")
+    csv = os.path.splitext(path)[0] + ".csv"
+    if os.path.exists(csv):
+        rows = np.loadtxt(csv, delimiter=",", ndmin=2)
+        if rows.shape[1] != model.nq:
+            problems.append(f"{csv}: {rows.shape[1]} columns, the model nq = {model.nq}")
+        else:
+            qpos_csv = np.concatenate([rows[:, :3], rows[:, [6, 3, 4, 5]], rows[:, 7:]], axis=1)
+            bad = 0
+            for q in qpos_csv:
+                data.qpos[:] = q
+                mujoco.mj_fwdPosition(model, data)
+                for j in hinges:
+                    v = data.qpos[model.jnt_qposadr[j]]
+                    bad += int(model.jnt_limited[j] and (v < model.jnt_range[j][0] - 1e-9 or v > model.jnt_range[j][1] + 1e-9))
+            if bad or not np.allclose(np.linalg.norm(rows[:, 3:7], axis=1), 1.0, atol=1e-9):
+                problems.append(f"{csv}: {bad} joint-rows outside their ranges, or a root quaternion not unit")
+            print(f"   {os.path.basename(csv)}: {len(rows)} rows at 30 fps into MuJoCo, {bad} outside ranges")
     return [f"{path}: {p}" for p in problems]
 
 
