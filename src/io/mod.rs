@@ -17,6 +17,22 @@ pub use source::MarkerFile;
 
 use std::path::Path;
 
+/// Writes `bytes` to `path` through a temporary file beside it (`<path>.tmp<pid>`) and a rename:
+/// a reader never sees a partial file, and a failed write leaves none behind. Creates the
+/// parent folder.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    if let Some(d) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(d)?;
+    }
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(format!(".tmp{}", std::process::id()));
+    let written = std::fs::write(&tmp, bytes).and_then(|()| std::fs::rename(&tmp, path));
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
+}
+
 /// Errors reading a marker file of any supported format.
 #[derive(Debug, thiserror::Error)]
 pub enum MarkerFileError {

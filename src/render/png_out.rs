@@ -64,12 +64,5 @@ pub fn depth_mm(d: f32) -> u16 {
 /// Writes `bytes` to `path` through a temporary file beside it and a rename: a reader never
 /// sees a partial file, and an interrupted run leaves none behind under the final name.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), RenderError> {
-    let io = |source| RenderError::Io { file: path.display().to_string(), source };
-    if let Some(d) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(d).map_err(io)?;
-    }
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(format!(".tmp{}", std::process::id()));
-    std::fs::write(&tmp, bytes).map_err(io)?;
-    std::fs::rename(&tmp, path).map_err(io)
+    crate::io::write_atomic(path, bytes).map_err(|source| RenderError::Io { file: path.display().to_string(), source })
 }

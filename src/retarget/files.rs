@@ -100,19 +100,9 @@ fn check(path: &Path, m: &RobotMotion, bodies: bool) -> Result<(), FilesError> {
     m.check(bodies).map_err(|what| FilesError::Motion { file: path.display().to_string(), what })
 }
 
-/// Writes `bytes` to `path` through a temporary file beside it and a rename: a reader never
-/// sees a partial file (as `render::png_out::write_atomic`).
+/// [`crate::io::write_atomic`] with the file named in the error.
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FilesError> {
-    if let Some(d) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(d).map_err(io_error(path))?;
-    }
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(format!(".tmp{}", std::process::id()));
-    let written = std::fs::write(&tmp, bytes).and_then(|()| std::fs::rename(&tmp, path));
-    if written.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    written.map_err(io_error(path))
+    crate::io::write_atomic(path, bytes).map_err(io_error(path))
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -68,7 +68,8 @@ pub struct Mapping {
     /// Robot joint angles (rad) matching the human model at zero coordinates.
     #[serde(default)]
     pub reference: BTreeMap<String, f64>,
-    /// Joint velocity limits (rad/s) by glob pattern over joint names; the first match counts.
+    /// Joint velocity limits (rad/s) by glob pattern over joint names; patterns should not
+    /// overlap (where they do, the first in sorted order counts).
     #[serde(default)]
     pub velocity: BTreeMap<String, f64>,
     #[serde(rename = "task")]

@@ -140,7 +140,7 @@ pub fn retarget(human: &Human, robot: &Robot, plan: &Plan, settings: &RetargetSe
     }
     let (mut prev, mut prev2) = (q.clone(), q.clone());
     let mut pins: Vec<Option<Pin>> = vec![None; plan.feet.len()];
-    let mut out = report::Recorder::new(robot, plan, n);
+    let mut out = report::Recorder::new(plan, n);
     let mut all_q = Vec::with_capacity(n);
     for i in 0..n {
         let dt = if i > 0 { human.times[i] - human.times[i - 1] } else { 0.0 };

@@ -119,8 +119,7 @@ pub(super) struct Recorder {
 }
 
 impl Recorder {
-    pub fn new(robot: &Robot, plan: &Plan, n: usize) -> Recorder {
-        let _ = robot;
+    pub fn new(plan: &Plan, n: usize) -> Recorder {
         Recorder {
             qpos: Vec::with_capacity(n),
             body_pos: Vec::with_capacity(n),
@@ -142,13 +141,7 @@ impl Recorder {
             self.errors[k].push((ws.body_pos[task.robot_body] - t.pos[i][k]).norm());
         }
         for (k, f) in plan.feet.iter().enumerate() {
-            let low = robot
-                .capsules
-                .iter()
-                .zip(s.ends())
-                .filter(|(c, _)| c.body == f.robot_body)
-                .map(|(c, (a, b))| a.z.min(b.z) - c.radius)
-                .fold(f64::INFINITY, f64::min);
+            let low = s.lowest_of(f.robot_body);
             self.feet[k].push((ws.body_pos[f.robot_body], low));
         }
         let closest = s.closest_pair();

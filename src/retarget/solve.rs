@@ -181,14 +181,19 @@ impl<'a> Solver<'a> {
         let mut best = f64::INFINITY;
         for &(i, j) in &self.robot.pairs {
             let ((bi, ri), (bj, rj)) = (self.bounds[i], self.bounds[j]);
-            if (bi - bj).norm_squared() > (ri + rj).powi(2) {
-                continue;
+            if (bi - bj).norm_squared() <= (ri + rj).powi(2) {
+                best = best.min(self.pair_distance(i, j).0);
             }
-            let (ci, cj) = (&self.robot.capsules[i], &self.robot.capsules[j]);
-            let (ei, ej) = (&self.ends[i], &self.ends[j]);
-            best = best.min(capsule_distance((&ei.0, &ei.1, ci.radius), (&ej.0, &ej.1, cj.radius)).0);
         }
         best
+    }
+
+    /// Signed distance (m) between capsules `i` and `j` at the last [`Solver::forward`], and
+    /// their closest axis points (world).
+    pub fn pair_distance(&self, i: usize, j: usize) -> (f64, Vector3<f64>, Vector3<f64>) {
+        let (ci, cj) = (&self.robot.capsules[i], &self.robot.capsules[j]);
+        let (ei, ej) = (&self.ends[i], &self.ends[j]);
+        capsule_distance((&ei.0, &ei.1, ci.radius), (&ej.0, &ej.1, cj.radius))
     }
 
     /// Up to `n` Gauss–Newton iterations (collision weight × `stiffer`); the iterations used.
@@ -226,15 +231,20 @@ impl<'a> Solver<'a> {
         used
     }
 
-    /// Lowest point of any planted-capable foot's capsules above the ground (m).
+    /// Lowest point of any foot's capsules above the ground (m).
     pub fn lowest_sole(&self) -> f64 {
-        let feet = &self.plan.feet;
+        self.plan.feet.iter().map(|f| self.lowest_of(f.robot_body)).fold(f64::INFINITY, f64::min)
+    }
+
+    /// Lowest point of body `b`'s capsules above the ground (m; `+∞` without capsules), at the
+    /// last [`Solver::forward`].
+    pub fn lowest_of(&self, b: usize) -> f64 {
         self.robot
             .capsules
             .iter()
             .zip(&self.ends)
-            .filter(|(c, _)| feet.iter().any(|f| f.robot_body == c.body))
-            .map(|(c, (a, b))| a.z.min(b.z) - c.radius)
+            .filter(|(c, _)| c.body == b)
+            .map(|(c, (p, q))| p.z.min(q.z) - c.radius)
             .fold(f64::INFINITY, f64::min)
     }
 
@@ -349,20 +359,18 @@ impl<'a> Solver<'a> {
         let (m, w) = (self.settings.collision_margin, self.settings.collision);
         for p in 0..self.robot.pairs.len() {
             let (i, j) = self.robot.pairs[p];
-            let (ci, cj) = (&self.robot.capsules[i], &self.robot.capsules[j]);
-            let (ei, ej) = (self.ends[i], self.ends[j]);
             let ((bi, ri), (bj, rj)) = (self.bounds[i], self.bounds[j]);
             if !self.sticky[p] && (bi - bj).norm_squared() > (ri + rj + m).powi(2) {
                 continue;
             }
-            let (d, pa, pb) = capsule_distance((&ei.0, &ei.1, ci.radius), (&ej.0, &ej.1, cj.radius));
+            let (d, pa, pb) = self.pair_distance(i, j);
             if (d >= m && !self.sticky[p]) || (pa - pb).norm() < 1e-9 {
                 continue;
             }
             self.sticky[p] = true;
             let push = (m - d).max(0.0);
             let n = (pa - pb).normalize();
-            let (bi, bj) = (ci.body, cj.body);
+            let (bi, bj) = (self.robot.capsules[i].body, self.robot.capsules[j].body);
             // J_a − J_b along n: rows of both points, the second with its sign flipped.
             self.point_jacobian(bi, &pa);
             self.add_row(w, &n, push * 0.5);
@@ -501,11 +509,7 @@ mod tests {
         let mut s = Solver::new(&robot, &plan, settings);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         let h = 1e-7;
-        let distance = |s: &Solver, (i, j): (usize, usize)| {
-            let (ci, cj) = (&robot.capsules[i], &robot.capsules[j]);
-            let (ei, ej) = (s.ends[i], s.ends[j]);
-            capsule_distance((&ei.0, &ei.1, ci.radius), (&ej.0, &ej.1, cj.radius))
-        };
+        let distance = |s: &Solver, (i, j): (usize, usize)| s.pair_distance(i, j);
         for _ in 0..5 {
             let q = posture(&robot, &mut rng);
             for &pair in robot.pairs.iter().step_by(37) {
