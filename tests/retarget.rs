@@ -171,7 +171,14 @@ fn synthetic_walks_retarget_within_the_robots_limits_and_the_same_bytes_every_ru
         );
         meets_the_requirements(name, r);
         assert_eq!(r.frames, 120);
+        assert_eq!(r.non_finite_frames, 0);
     }
+    // A solution with a non-finite number is never `ok`.
+    let mut broken = first[0].1.clone();
+    broken.non_finite_frames = 3;
+    broken.judge();
+    assert_eq!(broken.status, "suspect");
+    assert!(broken.reasons[0].contains("3 frames with non-finite coordinates"), "{:?}", broken.reasons);
     retargeted(&trials, &dir.join("b"));
     // Two trials of one name into one folder: refused, nothing overwritten.
     let both: Vec<&str> = trials.iter().map(|t| t.to_str().unwrap()).collect();

@@ -48,6 +48,9 @@ pub struct Report {
     pub tracking: Vec<Tracking>,
     /// Hand, foot and pelvis tracking, median over them (mm).
     pub end_effector_median_mm: f64,
+    /// Frames whose solution holds a non-finite number (never `ok`).
+    #[serde(default)]
+    pub non_finite_frames: usize,
     /// Joint-frames outside the joint's range (beyond 1e-9 rad).
     pub range_violations: usize,
     /// Joint-steps faster than the joint's velocity limit (beyond 1e-9 rad/s).
@@ -76,6 +79,9 @@ impl Report {
     /// Sets `status` and `reasons` from the measurements.
     pub fn judge(&mut self) {
         let mut r = Vec::new();
+        if self.non_finite_frames > 0 {
+            r.push(format!("{} frames with non-finite coordinates", self.non_finite_frames));
+        }
         if self.range_violations > 0 {
             r.push(format!("{} joint-frames outside their ranges", self.range_violations));
         }
@@ -241,6 +247,7 @@ impl Recorder {
             leg_ratio: plan.leg_ratio,
             tracking,
             end_effector_median_mm: quantile(&leaves, 0.5) * 1e3,
+            non_finite_frames: q.iter().filter(|f| f.iter().any(|v| !v.is_finite())).count(),
             range_violations,
             velocity_violations,
             feet,
