@@ -89,6 +89,21 @@ fn convert_with_a_robot_adds_its_files_and_channels_and_copies_every_other_recor
         let state: Vec<u64> = messages(&a).into_iter().filter(|m| m.0 == "/smocap/state").map(|m| m.3).collect();
         let robot: Vec<u64> = messages(&b).into_iter().filter(|m| m.0 == "/robot/tf").map(|m| m.3).collect();
         assert_eq!(robot, state);
+        // Retargeted from the solved motion while the file was written, the robot is the one
+        // `smocap retarget` makes from the finished file (scaled model against model + scales:
+        // the same poses to far below the /tf grid, 2^-15 m).
+        let setup = smocap::cli::robot::RobotSetup::load("g1", None, None).unwrap();
+        let rec = smocap::archive::export::read_trial_record(&b).unwrap();
+        let done = setup.retarget(&smocap::render::Take::from_record(&rec, &b).unwrap()).unwrap();
+        let tf = robot_tf(&b);
+        assert_eq!(tf.len(), done.motion.body_pos_w.len());
+        for (k, msg) in tf.iter().enumerate() {
+            for (b, want) in done.motion.body_pos_w[k].iter().enumerate() {
+                let p = msg.transforms[b + 1].translation.unwrap();
+                let err = (p.x - want[0]).abs().max((p.y - want[1]).abs()).max((p.z - want[2]).abs());
+                assert!(err <= 0.5 / 32768.0 + 1e-9, "{t} frame {k} body {b}: off by {err} m");
+            }
+        }
     }
     let r = report(&rj);
     for t in r["trials"].as_array().unwrap() {

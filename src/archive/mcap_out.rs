@@ -214,6 +214,17 @@ pub struct TrialWriter<'a> {
     state: proto::State,
     stats: proto::SolverStats,
     buf: Vec<u8>,
+    /// The motion as written, when kept ([`TrialWriter::keep_motion`]).
+    kept: Option<KeptMotion>,
+}
+
+/// A trial's motion as its file records it ([`TrialWriter::keep_motion`]): per frame written,
+/// `/smocap/state`'s coordinates (model order), time since the first sample (s) and frame index.
+#[derive(Clone, Debug, Default)]
+pub struct KeptMotion {
+    pub q: Vec<Vec<f64>>,
+    pub times: Vec<f64>,
+    pub frames: Vec<usize>,
 }
 
 impl<'a> TrialWriter<'a> {
@@ -297,6 +308,7 @@ impl<'a> TrialWriter<'a> {
             calibrated_scale: ctx.proxy.state(&calibration.proxies)[model.nq()..].to_vec(),
             calibrated_proxies: calibration.proxies.clone(),
             buf: Vec::with_capacity(1 << 12),
+            kept: None,
         };
         // From here on, dropping `tw` removes the temporary file.
         tw.w = Some(w?);
@@ -492,8 +504,34 @@ impl<'a> TrialWriter<'a> {
         self.write(ch, 0, ns, &msg)
     }
 
+    /// Keeps the motion of the frames written from now on ([`TrialWriter::kept`]).
+    pub fn keep_motion(&mut self) {
+        self.kept = Some(KeptMotion::default());
+    }
+
+    /// The motion kept since [`TrialWriter::keep_motion`].
+    pub fn kept(&self) -> Option<&KeptMotion> {
+        self.kept.as_ref()
+    }
+
+    /// The calibrated scale factors, `3·body + axis` (what `/tf` and `/scene` are drawn with).
+    pub fn calibrated_scale(&self) -> &[f64] {
+        &self.calibrated_scale
+    }
+
+    /// The rotation from `model` to the Z-up `world`.
+    pub fn world_from_model(&self) -> UnitQuaternion<f64> {
+        world_from_model(self.ctx.up)
+    }
+
+    /// The file's MCAP writer, to add channels and messages of its own, and the file's name
+    /// (for errors).
+    pub fn raw(&mut self) -> (&mut mcap::Writer<BufWriter<std::fs::File>>, String) {
+        (self.w.as_mut().expect("present until finished"), self.tmp.display().to_string())
+    }
+
     /// Log time of frame `f` (ns): the epoch plus its time since the trial's first sample.
-    fn log_ns(&self, f: usize) -> u64 {
+    pub fn log_ns(&self, f: usize) -> u64 {
         self.epoch_ns + (self.since_start(f).max(0.0) * 1e9).round() as u64
     }
 
@@ -541,6 +579,11 @@ impl<'a> TrialWriter<'a> {
         self.state.time = t;
         self.state.q.clear();
         self.state.q.extend_from_slice(&self.y[..model.nq()]);
+        if let Some(k) = &mut self.kept {
+            k.q.push(self.state.q.clone());
+            k.times.push(t);
+            k.frames.push(f);
+        }
         // /tf: the frame's pose on the subject's calibrated scales (as the skeleton in /scene):
         // `world → model` (fixed), then each body in its parent.
         // (When the frame's scales are the calibrated ones, bit for bit, the pose is already

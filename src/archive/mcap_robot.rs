@@ -9,7 +9,10 @@
 //! origin). Log times: each robot frame at the log time of the human frame it was retargeted
 //! from (that frame's `/smocap/state` message), so the two play in step.
 //!
-//! The file is rewritten, never edited: every schema, channel (same ids), message (same
+//! Two ways in: `smocap convert --robot` writes the robot into the trial's file as it is
+//! finished ([`write_track`]: the robot's messages after the human's, in their own chunks);
+//! `smocap retarget --into-mcap` adds it to a finished file ([`add_robot`]).
+//! That file is rewritten, never edited: every schema, channel (same ids), message (same
 //! sequence and times), metadata record and attachment is copied unchanged into
 //! `<file>.partial`, the robot's channels and metadata are added, and the temporary file is
 //! renamed over the original once complete. Channels under `/robot/` and the `smocap.robot`
@@ -137,6 +140,73 @@ pub fn add_robot_to(buf: &[u8], path: &Path, track: &RobotTrack, opt: &WriterOpt
     out.finish(path)
 }
 
+/// Writes `track` into a trial's file being written (`smocap convert --robot`): its channels,
+/// `/robot/scene` and each `/robot/tf` message at `log_ns[k]` (the log time of the human frame
+/// robot frame `k` was retargeted from), and the `smocap.robot` record. `file` names the file in
+/// errors.
+pub fn write_track<W: std::io::Write + std::io::Seek>(
+    w: &mut mcap::Writer<W>,
+    track: &RobotTrack,
+    log_ns: &[u64],
+    file: &str,
+) -> Result<(), McapOutError> {
+    let bad = |what: String| McapOutError::Io { file: file.into(), source: std::io::Error::other(what) };
+    if track.poses.len() != log_ns.len() || track.poses.iter().any(|p| p.len() != track.bodies.len()) {
+        return Err(bad("robot poses do not match its frames and bodies".into()));
+    }
+    let mc = |source| McapOutError::Mcap { file: file.into(), source };
+    let tf_ch = track_channel(w, &ROBOT_TF, track).map_err(mc)?;
+    let scene_ch = track_channel(w, &ROBOT_SCENE, track).map_err(mc)?;
+    let mut buf = Vec::with_capacity(1 << 12);
+    let mut put = |w: &mut mcap::Writer<W>, ch: u16, sequence: u32, ns: u64, msg: &dyn Fn(&mut Vec<u8>)| {
+        buf.clear();
+        msg(&mut buf);
+        let header = MessageHeader { channel_id: ch, sequence, log_time: ns, publish_time: ns };
+        w.write_to_known_channel(&header, &buf).map_err(mc)
+    };
+    let grows = "a Vec grows as needed";
+    if let Some(&ns) = log_ns.first() {
+        let msg = scene(track, ns);
+        put(w, scene_ch, 0, ns, &|b| msg.encode(b).expect(grows))?;
+    }
+    // One message refilled per frame: the frame names are built once.
+    let mut msg = tf(track, 0, log_ns.first().copied().unwrap_or(0));
+    for (k, &ns) in log_ns.iter().enumerate() {
+        refill_tf(&mut msg, track, k, ns);
+        put(w, tf_ch, track.frames[k] as u32, ns, &|b| msg.encode(b).expect(grows))?;
+    }
+    w.write_metadata(&track_record(track)).map_err(mc)
+}
+
+/// Adds robot channel `c` (and its schema) with its metadata (units, frames, the robot).
+fn track_channel<W: std::io::Write + std::io::Seek>(
+    w: &mut mcap::Writer<W>,
+    c: &ChannelSpec,
+    track: &RobotTrack,
+) -> Result<u16, mcap::McapError> {
+    let o = track.offset;
+    let meta: BTreeMap<String, String> = [
+        ("length_unit", "m".to_string()),
+        ("robot", track.name.clone()),
+        ("frame", format!("{}/world", track.name)),
+        ("offset", format!("[{}, {}, {}] (m, the robot's world in world, Z up)", o.x, o.y, o.z)),
+        ("log_time", "the log time of the human frame the robot frame was retargeted from".into()),
+        ("rate", if c.per_frame { "one message per frame" } else { "one message, at the first frame" }.into()),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect();
+    let s = w.add_schema(c.schema, "protobuf", c.descriptors)?;
+    w.add_channel(s, c.topic, "protobuf", &meta)
+}
+
+/// The `smocap.robot` record of `track`.
+fn track_record(track: &RobotTrack) -> Metadata {
+    let mut meta = track.metadata.clone();
+    meta.insert("robot".into(), track.name.clone());
+    Metadata { name: ROBOT_METADATA.into(), metadata: meta }
+}
+
 /// The frame index of a `/smocap/state` message (protobuf, or the JSON encoding of older
 /// files); `None` for other messages.
 fn state_frame(m: &mcap::Message) -> Option<usize> {
@@ -168,6 +238,17 @@ fn tf(track: &RobotTrack, k: usize, ns: u64) -> proto::FrameTransforms {
         rotation: Some(quat(r)),
     }));
     proto::FrameTransforms { transforms }
+}
+
+/// [`tf`] of frame `k` written over `msg` (a [`tf`] of the same track): times and poses only.
+fn refill_tf(msg: &mut proto::FrameTransforms, track: &RobotTrack, k: usize, ns: u64) {
+    let stamp = Some(Timestamp::from_ns(ns));
+    msg.transforms[0].timestamp = stamp;
+    for (t, (r, p)) in msg.transforms[1..].iter_mut().zip(&track.poses[k]) {
+        t.timestamp = stamp;
+        t.translation = Some(v3(p));
+        t.rotation = Some(quat(r));
+    }
 }
 
 /// The `/robot/scene` message: per body with capsules, an entity in its frame with a cylinder and
@@ -280,23 +361,8 @@ impl Rewrite {
 
     /// Adds robot channel `c` with its metadata (units, frames, the robot).
     fn channel(&mut self, c: &ChannelSpec, track: &RobotTrack) -> Result<u16, McapOutError> {
-        let o = track.offset;
-        let meta: BTreeMap<String, String> = [
-            ("length_unit", "m".to_string()),
-            ("robot", track.name.clone()),
-            ("frame", format!("{}/world", track.name)),
-            ("offset", format!("[{}, {}, {}] (m, the robot's world in world, Z up)", o.x, o.y, o.z)),
-            ("log_time", "the log time of the human frame the robot frame was retargeted from".into()),
-            ("rate", if c.per_frame { "one message per frame" } else { "one message, at the first frame" }.into()),
-        ]
-        .into_iter()
-        .map(|(k, v)| (k.to_string(), v))
-        .collect();
-        let w = self.w.as_mut().expect("present until finished");
-        let id = w
-            .add_schema(c.schema, "protobuf", c.descriptors)
-            .and_then(|s| w.add_channel(s, c.topic, "protobuf", &meta));
-        id.map_err(self.err())
+        let r = track_channel(self.w(), c, track);
+        r.map_err(self.err())
     }
 
     fn message(&mut self, ch: u16, sequence: u32, ns: u64, data: &[u8]) -> Result<(), McapOutError> {
@@ -323,9 +389,7 @@ impl Rewrite {
             };
             r.map_err(self.err())?;
         }
-        let mut meta = track.metadata.clone();
-        meta.insert("robot".into(), track.name.clone());
-        let r = self.w().write_metadata(&Metadata { name: ROBOT_METADATA.into(), metadata: meta });
+        let r = self.w().write_metadata(&track_record(track));
         r.map_err(self.err())
     }
 

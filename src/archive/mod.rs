@@ -6,6 +6,7 @@ pub mod config;
 pub mod convert;
 pub mod discover;
 pub mod export;
+pub mod hook;
 pub mod inspect;
 pub mod lock;
 pub mod mcap_check;

@@ -5,9 +5,12 @@
 //! The solver runs on the caller's thread; the file is written (kinematics of the frame,
 //! protobuf encoding, zstd) on a writer thread of its own, fed through a bounded queue of
 //! [`QUEUE_FRAMES`] solved frames, so a slow disk holds the solver back rather than memory
-//! growing.
+//! growing. With a hook ([`super::hook`], `--robot`), the writer also keeps each frame's
+//! coordinates (`nq` numbers a frame) for it; the hook runs on the trial's motion once the last
+//! frame is written, before the file is finished.
 
 use super::config::Dataset;
+use super::hook::{HookOutcome, HookWork, SolvedMotion, TrialHook};
 use super::mcap_out::{McapOutError, RunInfo, TrialNames, TrialWriter, WriterOptions};
 use crate::io::MarkerFile;
 use crate::kinematics::backend::BatchBackend;
@@ -22,6 +25,7 @@ use crate::pipeline::running::unfittable::Unfittable;
 use crate::pipeline::stats::P50P90;
 use crate::pipeline::{Context, SolvedFrame};
 use crate::solve::Calibration;
+use rayon::prelude::*;
 use std::path::Path;
 
 /// A subject ready to solve its trials.
@@ -126,33 +130,34 @@ pub struct Solved {
     /// `/smocap/unfittable`), and the verdict's words for those blamed on the data.
     pub unfittable: Vec<Unfittable>,
     pub reason: Option<String>,
+    /// What the trial's hook did ([`TrialJob::hook`]), when it had one.
+    pub robot: Option<HookOutcome>,
 }
 
-/// Solves `trial` and streams it to `out` (via its `.partial` file); `run` is the `smocap.run`
+/// Solves `job.trial` and streams it to `job.out` (via its `.partial` file); `job.run` is the `smocap.run`
 /// metadata; `frames_done` counts frames as they are written (progress display). On any error
 /// the temporary file is removed and no file has the final name. Solved on the caller's thread,
 /// one lane, on the CPU backend.
 pub fn solve_and_write(
-    out: &Path,
-    name: &str,
-    trial: &dyn TrialFrames,
+    job: TrialJob<'_>,
     cal: &Calibrated,
-    run: &RunInfo,
     opt: &WriterOptions,
     frames_done: Option<&std::sync::atomic::AtomicU64>,
 ) -> Result<Solved, String> {
-    let job = [TrialJob { out, name, trial, run }];
+    let job = [job];
     solve_and_write_all(&job, cal, opt, frames_done, Solver { threads: 1, lanes: 1, backend: None })
         .pop()
         .expect("one result per trial")
 }
 
-/// One trial of [`solve_and_write_all`]: where it goes, its name, frames and `smocap.run`.
+/// One trial of [`solve_and_write_all`]: where it goes, its name, frames and `smocap.run`, and
+/// the work done on its solved motion before its file is finished (`--robot`).
 pub struct TrialJob<'a> {
     pub out: &'a Path,
     pub name: &'a str,
     pub trial: &'a dyn TrialFrames,
     pub run: &'a RunInfo,
+    pub hook: Option<&'a dyn TrialHook>,
 }
 
 /// How [`solve_and_write_all`] solves: worker threads for the QPs, lanes of the scheduler, and
@@ -249,14 +254,24 @@ pub fn solve_and_write_all(
             let Solver { threads, lanes, backend } = solver;
             solve_trials_streaming(ctx, streams, &cal.calibration, threads, lanes, backend)
         };
-        for ((i, mut c, writing), solved) in live.into_iter().zip(solved) {
-            let mut solved = solved.map_err(|e| e.to_string());
-            let tx = c.tx.take().expect("the sender is kept until the solve ends");
-            if solved.is_ok() && !c.batch.is_empty() && tx.send(std::mem::take(&mut c.batch)).is_err() {
-                solved = Err("the writer stopped".into());
-            }
-            drop(tx);
-            results[i] = Some(finish_trial(&jobs[i], cal, solved, writing.join(), c));
+        // The trials finished (and their hooks run) in parallel on the run's pool.
+        let finished: Vec<(usize, Result<Solved, String>)> = live
+            .into_iter()
+            .zip(solved)
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .map(|((i, mut c, writing), solved)| {
+                let mut solved = solved.map_err(|e| e.to_string());
+                let tx = c.tx.take().expect("the sender is kept until the solve ends");
+                if solved.is_ok() && !c.batch.is_empty() && tx.send(std::mem::take(&mut c.batch)).is_err() {
+                    solved = Err("the writer stopped".into());
+                }
+                drop(tx);
+                (i, finish_trial(&jobs[i], cal, solved, writing.join(), c))
+            })
+            .collect();
+        for (i, r) in finished {
+            results[i] = Some(r);
         }
     });
     results.into_iter().map(|r| r.expect("one result per trial")).collect()
@@ -279,6 +294,9 @@ fn start_writer<'s, 'w>(
     let mut writer =
         TrialWriter::create(job.out, ctx, job.trial.header(), &cal.calibration, &names, job.trial.label_qc(), opt)
             .map_err(|e| e.to_string())?;
+    if job.hook.is_some() {
+        writer.keep_motion();
+    }
     // The marker errors (unfittable frames) are accumulated on the writer thread, off the solver's.
     let mut errors = MarkerErrors::new(ctx, &cal.calibration);
     // Frames go over in batches of BATCH_FRAMES: one wake-up of the writer per batch, not
@@ -346,7 +364,13 @@ fn finish_trial(
     }
     let unfittable = errors.finish().unfittable;
     writer.unfittable(&unfittable).map_err(|e| e.to_string())?;
+    let work = job.hook.map(|h| (h, hook_work(h, job, cal, &mut writer)));
     writer.finish(&run, &cal.settings_json, cal.scaled_model.as_deref()).map_err(|e| e.to_string())?;
+    // The hook's files once the trial's file is complete.
+    let robot = work.map(|(h, w)| match w {
+        Ok(w) => h.write(job.out, w),
+        Err(why) => HookOutcome::failed(why),
+    });
     let Collect { mut ms, it, mut rmse, secs, .. } = c;
     rmse.retain(|x: &f64| x.is_finite());
     ms.retain(|x: &f64| x.is_finite());
@@ -360,5 +384,31 @@ fn finish_trial(
         label_qc: qc.map(|q| q.events.clone()).unwrap_or_default(),
         reason: crate::pipeline::running::unfittable::reason(&unfittable),
         unfittable,
+        robot,
     })
+}
+
+/// Runs `hook` on the motion `writer` kept and writes the poses it returns into the file.
+fn hook_work(
+    hook: &dyn TrialHook,
+    job: &TrialJob<'_>,
+    cal: &Calibrated,
+    writer: &mut TrialWriter<'_>,
+) -> Result<HookWork, String> {
+    let kept = writer.kept().cloned().unwrap_or_default();
+    let name = job.out.file_stem().map_or(job.name.into(), |s| s.to_string_lossy().into_owned());
+    let motion = SolvedMotion {
+        name: &name,
+        model: &cal.ctx().model,
+        scales: writer.calibrated_scale(),
+        q: &kept.q,
+        times: &kept.times,
+        frames: &kept.frames,
+        world_from_model: writer.world_from_model(),
+    };
+    let work = hook.on_motion(&motion)?;
+    let log_ns: Vec<u64> = work.track.frames.iter().map(|&f| writer.log_ns(f)).collect();
+    let (w, file) = writer.raw();
+    super::mcap_robot::write_track(w, &work.track, &log_ns, &file).map_err(|e| e.to_string())?;
+    Ok(work)
 }

@@ -4,7 +4,7 @@
 //! `smocap convert --robot` (as its post-trial hook, [`ConvertHook`]) and the Python package's
 //! `Trial.retarget`.
 
-use crate::archive::convert::{HookOutcome, TrialHook};
+use crate::archive::hook::{HookOutcome, HookWork, SolvedMotion, TrialHook};
 use crate::archive::mcap_out::WriterOptions;
 use crate::archive::mcap_robot;
 use crate::render::Take;
@@ -61,8 +61,13 @@ impl RobotSetup {
             times: &take.times,
             world_from_model: take.world_from_model,
         };
-        let plan = Plan::new(&self.robot, &self.mapping, &human)?;
-        Ok(retarget::retarget(&human, &self.robot, &plan, &self.settings, &take.name))
+        self.retarget_human(&human, &take.name)
+    }
+
+    /// Retargets the motion `human` of trial `name`.
+    pub fn retarget_human(&self, human: &Human<'_>, name: &str) -> Result<Retargeted, RetargetError> {
+        let plan = Plan::new(&self.robot, &self.mapping, human)?;
+        Ok(retarget::retarget(human, &self.robot, &plan, &self.settings, name))
     }
 
     /// Writes `<stem>.pkl`, `.csv`, `.npz` and the report `<stem>.json` (each atomically, the
@@ -146,7 +151,8 @@ pub fn parse_offset(s: &str) -> Result<[f64; 3], String> {
 }
 
 /// `smocap convert --robot`: each converted trial's robot files beside its MCAP file
-/// (`<trial>.<robot>.<ext>`) and the robot's channels in it.
+/// (`<trial>.<robot>.<ext>`) and the robot's channels in it: retargeted from the solved motion
+/// while the trial's file is written ([`TrialHook::on_motion`]), or from the file (resuming).
 pub struct ConvertHook {
     pub setup: RobotSetup,
     pub writer: WriterOptions,
@@ -169,23 +175,57 @@ impl TrialHook for ConvertHook {
     fn run(&self, mcap: &Path) -> Result<HookOutcome, String> {
         let stem = self.stem(mcap);
         match self.setup.trial(mcap, Some(&stem), Some(&self.writer)) {
-            Ok((r, seconds)) => {
-                let mut note = format!(
-                    "{}: {} frames in {seconds:.2} s, end effectors {:.1} mm median",
-                    self.setup.name, r.frames, r.end_effector_median_mm
-                );
-                if !r.reasons.is_empty() {
-                    note += &format!(": {}", r.reasons.join("; "));
-                }
-                Ok(HookOutcome { status: r.status, note })
-            }
+            Ok((r, seconds)) => Ok(self.outcome(&r, seconds)),
             Err(e) => {
-                // Complete or absent: what this run wrote of the trial's robot files goes.
-                for ext in EXTENSIONS {
-                    let _ = std::fs::remove_file(beside(&stem, ext));
-                }
+                self.remove_files(mcap);
                 Err(format!("{}: {e:#}", self.setup.name))
             }
+        }
+    }
+
+    fn on_motion(&self, m: &SolvedMotion<'_>) -> Result<HookWork, String> {
+        let human =
+            Human { model: m.model, scales: m.scales, q: m.q, times: m.times, world_from_model: m.world_from_model };
+        let start = std::time::Instant::now();
+        let done = self.setup.retarget_human(&human, m.name).map_err(|e| format!("{}: {e}", self.setup.name))?;
+        let seconds = start.elapsed().as_secs_f64();
+        let track = retarget::track::track(&self.setup.robot, &self.setup.name, &done, m.frames, self.setup.offset);
+        Ok(HookWork { track, payload: Box::new((done, seconds)) })
+    }
+
+    fn write(&self, mcap: &Path, work: HookWork) -> HookOutcome {
+        let Ok(b) = work.payload.downcast::<(Retargeted, f64)>() else {
+            return HookOutcome::failed(format!("{}: not a retargeted motion", self.setup.name));
+        };
+        let (done, seconds) = *b;
+        match self.setup.write_files(&self.stem(mcap), &done) {
+            Ok(()) => self.outcome(&done.report, seconds),
+            Err(e) => {
+                self.remove_files(mcap);
+                HookOutcome::failed(format!("{}: {e:#}", self.setup.name))
+            }
+        }
+    }
+}
+
+impl ConvertHook {
+    /// The outcome of a trial retargeted in `seconds` with report `r`.
+    fn outcome(&self, r: &Report, seconds: f64) -> HookOutcome {
+        let mut note = format!(
+            "{}: {} frames in {seconds:.2} s, end effectors {:.1} mm median",
+            self.setup.name, r.frames, r.end_effector_median_mm
+        );
+        if !r.reasons.is_empty() {
+            note += &format!(": {}", r.reasons.join("; "));
+        }
+        HookOutcome { status: r.status.clone(), note }
+    }
+
+    /// Complete or absent: what this run wrote of the trial's robot files goes.
+    fn remove_files(&self, mcap: &Path) {
+        let stem = self.stem(mcap);
+        for ext in EXTENSIONS {
+            let _ = std::fs::remove_file(beside(&stem, ext));
         }
     }
 }

@@ -41,7 +41,8 @@ pub struct SolveSettings {
     /// Gauss–Newton iterations per frame, and for the first frame.
     pub iterations: usize,
     pub first_iterations: usize,
-    /// Stop iterating once `max |Δ|` is below this (rad or m).
+    /// Stop iterating once the last step moved no body by more than this (m; a turn counts at
+    /// 0.1 m from the body's origin), or the shrinking steps cannot.
     pub tolerance: f64,
 }
 
@@ -58,7 +59,7 @@ impl Default for SolveSettings {
             collision_margin: 0.01,
             iterations: 8,
             first_iterations: 40,
-            tolerance: 1e-4,
+            tolerance: 5e-4,
         }
     }
 }
@@ -69,6 +70,14 @@ pub struct Pin {
     pub pos: Vector3<f64>,
     pub rot: Matrix3<f64>,
 }
+
+/// How far (m) a capsule end may move before the candidate collision pairs are listed again
+/// ([`Solver::list_pairs`]): a frame's steps rarely move an end by more.
+const LIST_SLACK: f64 = 0.03;
+
+/// The distance (m) from a body's origin at which its turn counts as motion in the convergence
+/// test ([`SolveSettings::tolerance`]): a link's size.
+const BODY_RADIUS: f64 = 0.1;
 
 /// Per-thread scratch of the solve; nothing is allocated per frame once built.
 pub struct Solver<'a> {
@@ -82,11 +91,19 @@ pub struct Solver<'a> {
     lb: DVector<f64>,
     ub: DVector<f64>,
     dx: DVector<f64>,
+    /// The previous iteration's step.
+    last_dx: DVector<f64>,
+    /// Body origins and orientations before the last step.
+    moved_from: Vec<Vector3<f64>>,
+    turned_from: Vec<Matrix3<f64>>,
     qp: BoxQp,
     /// Point Jacobian scratch: columns touched, and per column the position / angular parts.
     cols: Vec<usize>,
     jp: Vec<Vector3<f64>>,
     jr: Vec<Vector3<f64>>,
+    /// A gathered single row (collision pairs): its columns and entries (dense, by column).
+    row_cols: Vec<usize>,
+    row: Vec<f64>,
     /// Per body: the coordinate-driven motions on its chain, `(motion, coordinate, rotation?)`
     /// (each robot coordinate drives one motion: hinges and the free joint).
     chains: Vec<Vec<(usize, usize, bool)>>,
@@ -94,6 +111,10 @@ pub struct Solver<'a> {
     /// (centre, radius).
     ends: Vec<(Vector3<f64>, Vector3<f64>)>,
     bounds: Vec<(Vector3<f64>, f64)>,
+    /// The pairs that may come within the collision margin ([`Solver::list_pairs`]), in pair
+    /// order, and the capsule ends when they were listed.
+    listed: Vec<usize>,
+    listed_at: Vec<(Vector3<f64>, Vector3<f64>)>,
     /// Capsule pairs that came within the margin in this frame: their rows stay (pushing out, or
     /// holding the distance) for the frame's remaining iterations, so that a task pulling back
     /// in cannot make the rows flicker on and off between iterations.
@@ -114,13 +135,21 @@ impl<'a> Solver<'a> {
             lb: DVector::zeros(n),
             ub: DVector::zeros(n),
             dx: DVector::zeros(n),
+            last_dx: DVector::zeros(n),
+            moved_from: vec![Vector3::zeros(); robot.model.nb()],
+            turned_from: vec![Matrix3::zeros(); robot.model.nb()],
             qp: BoxQp::with_capacity(n),
             cols: Vec::with_capacity(n),
             jp: vec![Vector3::zeros(); n],
             jr: vec![Vector3::zeros(); n],
+            row_cols: Vec::with_capacity(n),
+            row: vec![0.0; n],
             chains: chain_motions(&robot.model),
             ends: vec![(Vector3::zeros(), Vector3::zeros()); robot.capsules.len()],
             bounds: vec![(Vector3::zeros(), 0.0); robot.capsules.len()],
+            listed: Vec::with_capacity(robot.pairs.len()),
+            // Far away: the first forward kinematics lists the pairs.
+            listed_at: vec![(Vector3::repeat(f64::INFINITY), Vector3::zeros()); robot.capsules.len()],
             sticky: vec![false; robot.pairs.len()],
         }
     }
@@ -140,11 +169,33 @@ impl<'a> Solver<'a> {
     pub fn forward(&mut self, q: &[f64]) {
         self.robot.state(q, &mut self.y);
         cpu::forward(&self.robot.model, &self.y, &mut self.ws);
-        for ((c, e), b) in self.robot.capsules.iter().zip(self.ends.iter_mut()).zip(self.bounds.iter_mut()) {
+        let mut moved = 0.0_f64;
+        for (k, c) in self.robot.capsules.iter().enumerate() {
             let (r, p) = (&self.ws.body_rot[c.body], &self.ws.body_pos[c.body]);
-            *e = (p + r * c.a, p + r * c.b);
-            *b = ((e.0 + e.1) * 0.5, 0.5 * (c.b - c.a).norm() + c.radius);
+            let e = (p + r * c.a, p + r * c.b);
+            let at = &self.listed_at[k];
+            moved = moved.max((e.0 - at.0).norm_squared()).max((e.1 - at.1).norm_squared());
+            self.ends[k] = e;
+            self.bounds[k] = ((e.0 + e.1) * 0.5, 0.5 * (c.b - c.a).norm() + c.radius);
         }
+        if moved > LIST_SLACK * LIST_SLACK {
+            self.list_pairs();
+        }
+    }
+
+    /// Lists the pairs whose bounding spheres are within the collision margin plus twice
+    /// [`LIST_SLACK`] (and those with rows held this frame), and where the capsules stand: until
+    /// a capsule end moves by more than the slack, no other pair can come within the margin.
+    fn list_pairs(&mut self) {
+        let reach = self.settings.collision_margin + 2.0 * LIST_SLACK;
+        self.listed.clear();
+        for (p, &(i, j)) in self.robot.pairs.iter().enumerate() {
+            let ((bi, ri), (bj, rj)) = (self.bounds[i], self.bounds[j]);
+            if self.sticky[p] || (bi - bj).norm_squared() <= (ri + rj + reach).powi(2) {
+                self.listed.push(p);
+            }
+        }
+        self.listed_at.copy_from_slice(&self.ends);
     }
 
     /// Solves frame `i` in place in `q` (warm start on entry). `prev`: the previous frame's
@@ -159,14 +210,13 @@ impl<'a> Solver<'a> {
     ) -> usize {
         let iterations = if prev.is_some() { self.settings.iterations } else { self.settings.first_iterations };
         self.sticky.fill(false);
+        // Each run of iterations ends with the forward kinematics of its result.
         let mut used = self.iterate(t, i, q, prev, pins, iterations, 1.0);
-        self.forward(q);
         if self.closest_pair() < 0.0 {
             // Still overlapping where the penalty balanced the tasks: the collision rows a
             // hundred times stiffer for as many iterations again.
             used += self.iterate(t, i, q, prev, pins, iterations, 100.0);
         }
-        self.forward(q);
         let lift = self.lowest_sole().min(0.0);
         if lift < 0.0 {
             q[2] -= lift;
@@ -179,7 +229,8 @@ impl<'a> Solver<'a> {
     /// bounding spheres touch (`+∞` when none do: then no pair overlaps).
     pub fn closest_pair(&self) -> f64 {
         let mut best = f64::INFINITY;
-        for &(i, j) in &self.robot.pairs {
+        for &p in &self.listed {
+            let (i, j) = self.robot.pairs[p];
             let ((bi, ri), (bj, rj)) = (self.bounds[i], self.bounds[j]);
             if (bi - bj).norm_squared() <= (ri + rj).powi(2) {
                 best = best.min(self.pair_distance(i, j).0);
@@ -210,25 +261,56 @@ impl<'a> Solver<'a> {
     ) -> usize {
         let base = self.settings.collision;
         self.settings.collision = base * stiffer;
-        let mut used = 0;
-        for _ in 0..n {
-            used += 1;
+        let (mut used, mut last) = (0, f64::INFINITY);
+        loop {
             self.forward(q);
+            if used > 0 {
+                // Converged when the last step moved no body by more than the tolerance, or
+                // when the steps still to come cannot: shrinking by `ρ`, they add up to
+                // `step ρ / (1 − ρ)`.
+                let (step, tol) = (self.body_motion(), self.settings.tolerance);
+                let rho = step / last;
+                if used == n || step < tol || (last.is_finite() && rho < 0.5 && step * rho / (1.0 - rho) < tol) {
+                    break;
+                }
+                last = step;
+                self.last_dx.copy_from(&self.dx);
+            }
+            self.moved_from.copy_from_slice(&self.ws.body_pos);
+            self.turned_from.copy_from_slice(&self.ws.body_rot);
+            used += 1;
             self.assemble(t, i, q, prev, pins);
             self.dx.fill(0.0);
             let problem = QpProblem { h: &self.h, g: &self.g, lb: &self.lb, ub: &self.ub };
             if self.qp.solve(&problem, &mut self.dx).is_err() {
                 break;
             }
+            // A step reversing the last one (`Δ_k ≈ ρ Δ_{k−1}`, `ρ < 0`: Gauss–Newton
+            // overshooting, as near a straightened knee) is shortened to `Δ_k / (1 − ρ)`, where
+            // the oscillation's limit lies (Aitken); the box is convex, so the step stays in it.
+            if used > 1 {
+                let rho = self.dx.dot(&self.last_dx) / self.last_dx.norm_squared();
+                if rho < 0.0 {
+                    self.dx /= 1.0 - rho;
+                }
+            }
             for (qj, d) in q.iter_mut().zip(self.dx.iter()) {
                 *qj += d;
-            }
-            if self.dx.amax() < self.settings.tolerance {
-                break;
             }
         }
         self.settings.collision = base;
         used
+    }
+
+    /// How far the last step moved the bodies (m): the largest over bodies of the origin's
+    /// displacement plus the turn (rad) times [`BODY_RADIUS`].
+    fn body_motion(&self) -> f64 {
+        let ws = &self.ws;
+        let moved = ws.body_pos.iter().zip(&self.moved_from).zip(ws.body_rot.iter().zip(&self.turned_from));
+        moved.fold(0.0, |m, ((p, p0), (r, r0))| {
+            // |R − R₀|_F = 2√2 sin(θ/2) ≈ √2 θ.
+            m.max((p - p0).norm() + BODY_RADIUS * (r - r0).norm() * std::f64::consts::FRAC_1_SQRT_2)
+        })
     }
 
     /// Lowest point of any foot's capsules above the ground (m).
@@ -249,27 +331,25 @@ impl<'a> Solver<'a> {
     }
 
     fn assemble(&mut self, t: &Targets, i: usize, q: &[f64], prev: Option<(&[f64], f64)>, pins: &[Option<Pin>]) {
-        self.h.fill(0.0);
+        // The QP reads H's upper triangle only: that is all that is written.
+        self.h.as_mut_slice().fill(0.0);
         self.g.fill(0.0);
         for k in 0..self.plan.tasks.len() {
             let task = &self.plan.tasks[k];
             let (b, wp, wr) = (task.robot_body, task.w_pos, task.w_rot);
             let x = self.ws.body_pos[b];
+            let ep = t.pos[i][k] - x;
+            let er = if wr > 0.0 { rot_error(&t.rot[i][k], &self.ws.body_rot[b]) } else { Vector3::zeros() };
             self.point_jacobian(b, &x);
-            if wp > 0.0 {
-                self.add_position(wp, &(t.pos[i][k] - x));
-            }
-            if wr > 0.0 {
-                self.add_rotation(wr, &rot_error(&t.rot[i][k], &self.ws.body_rot[b]));
-            }
+            self.add_pose(wp, &ep, wr, &er);
         }
         for (f, pin) in self.plan.feet.iter().zip(pins) {
             if let Some(pin) = pin {
-                let x = self.ws.body_pos[f.robot_body];
-                self.point_jacobian(f.robot_body, &x);
-                let w = self.settings.contact;
-                self.add_position(w, &(pin.pos - x));
-                self.add_rotation(w, &rot_error(&pin.rot, &self.ws.body_rot[f.robot_body]));
+                let (b, w) = (f.robot_body, self.settings.contact);
+                let x = self.ws.body_pos[b];
+                let er = rot_error(&pin.rot, &self.ws.body_rot[b]);
+                self.point_jacobian(b, &x);
+                self.add_pose(w, &(pin.pos - x), w, &er);
             }
         }
         self.add_ground();
@@ -297,39 +377,45 @@ impl<'a> Solver<'a> {
         }
     }
 
-    /// `w |J_p Δ − e|²` with the Jacobian in `jp`.
-    fn add_position(&mut self, w: f64, e: &Vector3<f64>) {
-        self.add_rows(w, e, Rows::Position);
+    /// `w_p |J_p Δ − e_p|² + w_r |J_ω Δ − e_r|²` with the Jacobian in `cols`, `jp`, `jr`
+    /// (upper triangle of `H`).
+    fn add_pose(&mut self, wp: f64, ep: &Vector3<f64>, wr: f64, er: &Vector3<f64>) {
+        let n = self.g.len();
+        let h = self.h.as_mut_slice();
+        for (ia, &a) in self.cols.iter().enumerate() {
+            let (pa, ra) = (self.jp[a] * wp, self.jr[a] * wr);
+            self.g[a] -= pa.dot(ep) + ra.dot(er);
+            for &b in &self.cols[ia..] {
+                h[a.max(b) * n + a.min(b)] += pa.dot(&self.jp[b]) + ra.dot(&self.jr[b]);
+            }
+        }
     }
 
-    /// `w |J_ω Δ − e|²` with the Jacobian in `jr`.
-    fn add_rotation(&mut self, w: f64, e: &Vector3<f64>) {
-        self.add_rows(w, e, Rows::Rotation);
+    /// Starts gathering a single row `r` (`w (r · Δ − e)²`, [`Self::add_gathered_row`]).
+    fn start_row(&mut self) {
+        self.row_cols.clear();
     }
 
-    /// `w (Σ_j (n · jp[j]) Δ_j − e)²`: the point's motion along `n`.
-    fn add_row(&mut self, w: f64, n: &Vector3<f64>, e: f64) {
-        self.add_rows(w, &Vector3::new(e, 0.0, 0.0), Rows::Along(*n));
+    /// Adds `n · jp[j]` over the columns in `cols` to the row being gathered.
+    fn gather_row(&mut self, n: &Vector3<f64>) {
+        for &j in &self.cols {
+            if !self.row_cols.contains(&j) {
+                self.row_cols.push(j);
+                self.row[j] = 0.0;
+            }
+            self.row[j] += n.dot(&self.jp[j]);
+        }
     }
 
-    /// `H += w JᵀJ`, `g −= w Jᵀe` over the columns in `cols`, `J`'s column `j` as `rows` picks it.
-    fn add_rows(&mut self, w: f64, e: &Vector3<f64>, rows: Rows) {
-        let col = |s: &Self, j: usize| match rows {
-            Rows::Position => s.jp[j],
-            Rows::Rotation => s.jr[j],
-            Rows::Along(n) => Vector3::new(n.dot(&s.jp[j]), 0.0, 0.0),
-        };
-        for ia in 0..self.cols.len() {
-            let a = self.cols[ia];
-            let ja = col(self, a);
-            self.g[a] -= w * ja.dot(e);
-            for ib in ia..self.cols.len() {
-                let b = self.cols[ib];
-                let v = w * ja.dot(&col(self, b));
-                self.h[(a, b)] += v;
-                if a != b {
-                    self.h[(b, a)] += v;
-                }
+    /// `w (r · Δ − e)²` with the gathered row `r` (upper triangle of `H`).
+    fn add_gathered_row(&mut self, w: f64, e: f64) {
+        let n = self.g.len();
+        let h = self.h.as_mut_slice();
+        for (ia, &a) in self.row_cols.iter().enumerate() {
+            let ra = w * self.row[a];
+            self.g[a] -= ra * e;
+            for &b in &self.row_cols[ia..] {
+                h[a.max(b) * n + a.min(b)] += ra * self.row[b];
             }
         }
     }
@@ -346,8 +432,10 @@ impl<'a> Solver<'a> {
             for end in [self.ends[k].0, self.ends[k].1] {
                 let gap = end.z - r;
                 if gap < m {
+                    self.start_row();
                     self.point_jacobian(body, &end);
-                    self.add_row(w, &Vector3::z(), m - gap);
+                    self.gather_row(&Vector3::z());
+                    self.add_gathered_row(w, m - gap);
                 }
             }
         }
@@ -357,7 +445,8 @@ impl<'a> Solver<'a> {
     /// relative motion along their normal, `nᵀ(J_a − J_b) Δ ≥ m_s − d`.
     fn add_collisions(&mut self) {
         let (m, w) = (self.settings.collision_margin, self.settings.collision);
-        for p in 0..self.robot.pairs.len() {
+        for l in 0..self.listed.len() {
+            let p = self.listed[l];
             let (i, j) = self.robot.pairs[p];
             let ((bi, ri), (bj, rj)) = (self.bounds[i], self.bounds[j]);
             if !self.sticky[p] && (bi - bj).norm_squared() > (ri + rj + m).powi(2) {
@@ -371,11 +460,13 @@ impl<'a> Solver<'a> {
             let push = (m - d).max(0.0);
             let n = (pa - pb).normalize();
             let (bi, bj) = (self.robot.capsules[i].body, self.robot.capsules[j].body);
-            // J_a − J_b along n: rows of both points, the second with its sign flipped.
+            // One row, nᵀ(J_a − J_b): the coordinates both points share (root, waist) cancel.
+            self.start_row();
             self.point_jacobian(bi, &pa);
-            self.add_row(w, &n, push * 0.5);
+            self.gather_row(&n);
             self.point_jacobian(bj, &pb);
-            self.add_row(w, &(-n), push * 0.5);
+            self.gather_row(&(-n));
+            self.add_gathered_row(w, push);
         }
     }
 
@@ -402,15 +493,6 @@ impl<'a> Solver<'a> {
             self.ub[j] = hi - q[j];
         }
     }
-}
-
-/// Which rows of a point's Jacobian a least-squares term uses.
-#[derive(Clone, Copy)]
-enum Rows {
-    Position,
-    Rotation,
-    /// The position rows projected on a direction: one row.
-    Along(Vector3<f64>),
 }
 
 /// Per body, the coordinate-driven motions of its chain (root first).

@@ -69,23 +69,7 @@ pub struct ConvertOptions {
     pub hook: Option<std::sync::Arc<dyn TrialHook>>,
 }
 
-/// Work done on each converted trial's complete MCAP file once it is written, on the worker
-/// that wrote it (`smocap convert --robot`: retargeting, which `cli` fills in; this layer knows
-/// nothing of robots). Its outputs must be complete or absent whenever [`TrialHook::run`]
-/// returns. Resuming, a trial already converted whose hook outputs are not [`TrialHook::done`]
-/// gets the hook run again.
-pub trait TrialHook: Send + Sync {
-    /// Whether the hook's outputs for the trial file `mcap` are complete.
-    fn done(&self, mcap: &Path) -> bool;
-    /// Runs on the complete trial file `mcap`: what it gave, or why it failed.
-    fn run(&self, mcap: &Path) -> Result<HookOutcome, String>;
-}
-
-impl std::fmt::Debug for dyn TrialHook {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("TrialHook")
-    }
-}
+pub use crate::archive::hook::{HookWork, SolvedMotion, TrialHook};
 
 /// The hook's outcome for a converted trial (`skipped`: done by an earlier run, resuming).
 fn hook_outcome(opt: &ConvertOptions, out: &Path, resumed: bool) -> Option<HookOutcome> {
@@ -93,7 +77,7 @@ fn hook_outcome(opt: &ConvertOptions, out: &Path, resumed: bool) -> Option<HookO
     if resumed && hook.done(out) {
         return Some(HookOutcome { status: "skipped".into(), note: String::new() });
     }
-    Some(hook.run(out).unwrap_or_else(|why| HookOutcome { status: "failed".into(), note: why }))
+    Some(hook.run(out).unwrap_or_else(HookOutcome::failed))
 }
 
 /// Trials solved together at most: each holds a writer thread (its 1 MiB chunk and zstd

@@ -124,17 +124,22 @@ fn batched(
         }
         let jobs: Vec<TrialJob<'_>> = opened
             .iter()
-            .map(|(t, out, trial, run)| TrialJob { out: out.as_path(), name: &t.rel, trial: trial.get(), run })
+            .map(|(t, out, trial, run)| TrialJob {
+                out: out.as_path(),
+                name: &t.rel,
+                trial: trial.get(),
+                run,
+                hook: opt.hook.as_deref(),
+            })
             .collect();
         let solver = Solver { threads: opt.jobs, lanes, backend: backend.as_mut().map(|(b, _)| &mut **b as _) };
         let progress = opt.progress.as_deref().map(|p| &p.frames_done);
         let results = solve_and_write_all(&jobs, cal, &opt.writer, progress, solver);
-        // Each trial's hook (its robot) on the pool, as trials are on the CPU path.
         let done: Vec<TrialOutcome> = opened
-            .par_iter()
+            .iter()
             .zip(results)
             .map(|((t, out, ..), r)| {
-                let o = trial_outcome(d, g, t, out, r, &summary, opt);
+                let o = trial_outcome(d, g, t, out, r, &summary);
                 report(&o);
                 o
             })
@@ -144,7 +149,7 @@ fn batched(
     outcomes
 }
 
-/// A converted trial's outcome, after the run's hook ([`super::TrialHook`]) ran on its file.
+/// A converted trial's outcome, with its hook's ([`super::TrialHook`]).
 fn trial_outcome(
     d: &Dataset,
     g: &SubjectGroup,
@@ -152,7 +157,6 @@ fn trial_outcome(
     out: &Path,
     r: Result<crate::archive::trial_job::Solved, String>,
     backend: &str,
-    opt: &ConvertOptions,
 ) -> TrialOutcome {
     match r {
         Ok(s) => TrialOutcome {
@@ -165,7 +169,7 @@ fn trial_outcome(
             label_qc: s.label_qc.clone(),
             unfittable: s.unfittable.clone(),
             reason: s.reason.clone(),
-            robot: super::hook_outcome(opt, out, false),
+            robot: s.robot.clone(),
             ..outcome(d, g, t, out, if s.suspect.is_some() { "suspect" } else { "ok" }, s.suspect.clone())
         },
         Err(e) => failed(d, g, t, out, e),
@@ -222,8 +226,10 @@ fn solve_one(
         Err(e) => return failed(d, g, t, out, e),
     };
     let run = run_info(d, g, t, hash, cal, trial.get(), opt, ("cpu", "cpu"));
-    let r = solve_and_write(out, &t.rel, trial.get(), cal, &run, writer, progress.map(|p| &p.frames_done));
-    trial_outcome(d, g, t, out, r, "cpu", opt)
+    let frames_done = progress.map(|p| &p.frames_done);
+    let job = TrialJob { out, name: &t.rel, trial: trial.get(), run: &run, hook: opt.hook.as_deref() };
+    let r = solve_and_write(job, cal, writer, frames_done);
+    trial_outcome(d, g, t, out, r, "cpu")
 }
 
 /// The `smocap.run` metadata of a trial solved on `backend` (name, device).

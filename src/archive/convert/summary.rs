@@ -46,15 +46,7 @@ pub struct TrialOutcome {
     pub robot: Option<HookOutcome>,
 }
 
-/// A post-trial hook's outcome ([`super::TrialHook`]).
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct HookOutcome {
-    /// `ok`, `suspect` (written, but see `note`), `failed` (nothing written: see `note`) or
-    /// `skipped` (done by an earlier run, `--resume`).
-    pub status: String,
-    /// One line: what was written, or why not.
-    pub note: String,
-}
+pub use crate::archive::hook::HookOutcome;
 
 /// A dataset's fate (skipped ones say why: its root is absent; failed ones too: a bad glob, a
 /// synthetic dataset that could not be generated, an unreadable folder).
