@@ -12,6 +12,8 @@
 //! below the ground lifts the root by that much (a pure translation: joints untouched).
 //! Derivation and weights: `docs/RETARGET.md`.
 
+mod rows;
+
 use super::collide::capsule_distance;
 use super::robot::Robot;
 use super::targets::{Plan, Targets};
@@ -57,7 +59,7 @@ impl Default for SolveSettings {
             ground_margin: 0.001,
             collision: 100.0,
             collision_margin: 0.01,
-            iterations: 8,
+            iterations: 5,
             first_iterations: 40,
             tolerance: 5e-4,
         }
@@ -119,6 +121,11 @@ pub struct Solver<'a> {
     /// holding the distance) for the frame's remaining iterations, so that a task pulling back
     /// in cannot make the rows flicker on and off between iterations.
     sticky: Vec<bool>,
+    /// A ground or collision row came on in the last assembly.
+    activated: bool,
+    /// Per capsule end (2 per capsule) of a foot: came below the ground margin in this frame;
+    /// its row stays (lifting, or holding it at the margin) for the frame's remaining iterations.
+    grounded: Vec<bool>,
 }
 
 impl<'a> Solver<'a> {
@@ -151,6 +158,8 @@ impl<'a> Solver<'a> {
             // Far away: the first forward kinematics lists the pairs.
             listed_at: vec![(Vector3::repeat(f64::INFINITY), Vector3::zeros()); robot.capsules.len()],
             sticky: vec![false; robot.pairs.len()],
+            activated: false,
+            grounded: vec![false; 2 * robot.capsules.len()],
         }
     }
 
@@ -210,6 +219,7 @@ impl<'a> Solver<'a> {
     ) -> usize {
         let iterations = if prev.is_some() { self.settings.iterations } else { self.settings.first_iterations };
         self.sticky.fill(false);
+        self.grounded.fill(false);
         // Each run of iterations ends with the forward kinematics of its result.
         let mut used = self.iterate(t, i, q, prev, pins, iterations, 1.0);
         if self.closest_pair() < 0.0 {
@@ -288,9 +298,10 @@ impl<'a> Solver<'a> {
             // A step reversing the last one (`Δ_k ≈ ρ Δ_{k−1}`, `ρ < 0`: Gauss–Newton
             // overshooting, as near a straightened knee) is shortened to `Δ_k / (1 − ρ)`, where
             // the oscillation's limit lies (Aitken); the box is convex, so the step stays in it.
+            // Not when a ground or collision row came on: the problem changed, the step is new.
             if used > 1 {
                 let rho = self.dx.dot(&self.last_dx) / self.last_dx.norm_squared();
-                if rho < 0.0 {
+                if rho < 0.0 && !self.activated {
                     self.dx /= 1.0 - rho;
                 }
             }
@@ -328,170 +339,6 @@ impl<'a> Solver<'a> {
             .filter(|(c, _)| c.body == b)
             .map(|(c, (p, q))| p.z.min(q.z) - c.radius)
             .fold(f64::INFINITY, f64::min)
-    }
-
-    fn assemble(&mut self, t: &Targets, i: usize, q: &[f64], prev: Option<(&[f64], f64)>, pins: &[Option<Pin>]) {
-        // The QP reads H's upper triangle only: that is all that is written.
-        self.h.as_mut_slice().fill(0.0);
-        self.g.fill(0.0);
-        for k in 0..self.plan.tasks.len() {
-            let task = &self.plan.tasks[k];
-            let (b, wp, wr) = (task.robot_body, task.w_pos, task.w_rot);
-            let x = self.ws.body_pos[b];
-            let ep = t.pos[i][k] - x;
-            let er = if wr > 0.0 { rot_error(&t.rot[i][k], &self.ws.body_rot[b]) } else { Vector3::zeros() };
-            self.point_jacobian(b, &x);
-            self.add_pose(wp, &ep, wr, &er);
-        }
-        for (f, pin) in self.plan.feet.iter().zip(pins) {
-            if let Some(pin) = pin {
-                let (b, w) = (f.robot_body, self.settings.contact);
-                let x = self.ws.body_pos[b];
-                let er = rot_error(&pin.rot, &self.ws.body_rot[b]);
-                self.point_jacobian(b, &x);
-                self.add_pose(w, &(pin.pos - x), w, &er);
-            }
-        }
-        self.add_ground();
-        self.add_collisions();
-        self.add_diagonal(q, prev);
-    }
-
-    /// Fills `cols`, `jp`, `jr` with the Jacobian of world point `x` fixed on body `b`: a
-    /// rotation of rate `f'` about world axis `ω` through `o` moves it by `f' ω × (x − o)` and
-    /// turns it by `f' ω`; a translation moves it by `f' σ ω` ([`cpu::chain_contributions`]
-    /// without the scale columns, which the robot does not have).
-    fn point_jacobian(&mut self, b: usize, x: &Vector3<f64>) {
-        self.cols.clear();
-        for &(k, j, rotation) in &self.chains[b] {
-            let (axis, origin, rate) = self.ws.motion(k);
-            let w = axis * rate;
-            self.cols.push(j);
-            if rotation {
-                self.jp[j] = w.cross(&(x - origin));
-                self.jr[j] = w;
-            } else {
-                self.jp[j] = w;
-                self.jr[j] = Vector3::zeros();
-            }
-        }
-    }
-
-    /// `w_p |J_p Δ − e_p|² + w_r |J_ω Δ − e_r|²` with the Jacobian in `cols`, `jp`, `jr`
-    /// (upper triangle of `H`).
-    fn add_pose(&mut self, wp: f64, ep: &Vector3<f64>, wr: f64, er: &Vector3<f64>) {
-        let n = self.g.len();
-        let h = self.h.as_mut_slice();
-        for (ia, &a) in self.cols.iter().enumerate() {
-            let (pa, ra) = (self.jp[a] * wp, self.jr[a] * wr);
-            self.g[a] -= pa.dot(ep) + ra.dot(er);
-            for &b in &self.cols[ia..] {
-                h[a.max(b) * n + a.min(b)] += pa.dot(&self.jp[b]) + ra.dot(&self.jr[b]);
-            }
-        }
-    }
-
-    /// Starts gathering a single row `r` (`w (r · Δ − e)²`, [`Self::add_gathered_row`]).
-    fn start_row(&mut self) {
-        self.row_cols.clear();
-    }
-
-    /// Adds `n · jp[j]` over the columns in `cols` to the row being gathered.
-    fn gather_row(&mut self, n: &Vector3<f64>) {
-        for &j in &self.cols {
-            if !self.row_cols.contains(&j) {
-                self.row_cols.push(j);
-                self.row[j] = 0.0;
-            }
-            self.row[j] += n.dot(&self.jp[j]);
-        }
-    }
-
-    /// `w (r · Δ − e)²` with the gathered row `r` (upper triangle of `H`).
-    fn add_gathered_row(&mut self, w: f64, e: f64) {
-        let n = self.g.len();
-        let h = self.h.as_mut_slice();
-        for (ia, &a) in self.row_cols.iter().enumerate() {
-            let ra = w * self.row[a];
-            self.g[a] -= ra * e;
-            for &b in &self.row_cols[ia..] {
-                h[a.max(b) * n + a.min(b)] += ra * self.row[b];
-            }
-        }
-    }
-
-    /// Rows lifting foot capsule ends that are below the ground margin.
-    fn add_ground(&mut self) {
-        let (m, w) = (self.settings.ground_margin, self.settings.ground);
-        for k in 0..self.robot.capsules.len() {
-            let c = &self.robot.capsules[k];
-            if !self.plan.feet.iter().any(|f| f.robot_body == c.body) {
-                continue;
-            }
-            let (body, r) = (c.body, c.radius);
-            for end in [self.ends[k].0, self.ends[k].1] {
-                let gap = end.z - r;
-                if gap < m {
-                    self.start_row();
-                    self.point_jacobian(body, &end);
-                    self.gather_row(&Vector3::z());
-                    self.add_gathered_row(w, m - gap);
-                }
-            }
-        }
-    }
-
-    /// Rows pushing apart capsule pairs closer than the collision margin: the closest points'
-    /// relative motion along their normal, `nᵀ(J_a − J_b) Δ ≥ m_s − d`.
-    fn add_collisions(&mut self) {
-        let (m, w) = (self.settings.collision_margin, self.settings.collision);
-        for l in 0..self.listed.len() {
-            let p = self.listed[l];
-            let (i, j) = self.robot.pairs[p];
-            let ((bi, ri), (bj, rj)) = (self.bounds[i], self.bounds[j]);
-            if !self.sticky[p] && (bi - bj).norm_squared() > (ri + rj + m).powi(2) {
-                continue;
-            }
-            let (d, pa, pb) = self.pair_distance(i, j);
-            if (d >= m && !self.sticky[p]) || (pa - pb).norm() < 1e-9 {
-                continue;
-            }
-            self.sticky[p] = true;
-            let push = (m - d).max(0.0);
-            let n = (pa - pb).normalize();
-            let (bi, bj) = (self.robot.capsules[i].body, self.robot.capsules[j].body);
-            // One row, nᵀ(J_a − J_b): the coordinates both points share (root, waist) cancel.
-            self.start_row();
-            self.point_jacobian(bi, &pa);
-            self.gather_row(&n);
-            self.point_jacobian(bj, &pb);
-            self.gather_row(&(-n));
-            self.add_gathered_row(w, push);
-        }
-    }
-
-    /// Smoothness, posture and damping on the diagonal, and the hard bounds.
-    fn add_diagonal(&mut self, q: &[f64], prev: Option<(&[f64], f64)>) {
-        let s = &self.settings;
-        let model = &self.robot.model;
-        for j in 0..model.nq() {
-            self.h[(j, j)] += s.damping;
-            let (lo, hi) = model.coordinates[j].range;
-            let (mut lo, mut hi) = (lo, hi);
-            if let Some((qp, dt)) = prev {
-                self.h[(j, j)] += s.smoothness;
-                self.g[j] += s.smoothness * (q[j] - qp[j]);
-                let v = self.robot.velocity[j] * dt;
-                lo = lo.max(qp[j] - v);
-                hi = hi.min(qp[j] + v);
-            }
-            if j >= 6 {
-                self.h[(j, j)] += s.posture;
-                self.g[j] += s.posture * (q[j] - self.plan.reference[j]);
-            }
-            self.lb[j] = lo - q[j];
-            self.ub[j] = hi - q[j];
-        }
     }
 }
 
