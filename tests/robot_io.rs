@@ -56,6 +56,25 @@ fn robot_tf(path: &Path) -> Vec<proto::FrameTransforms> {
     tf.map(|m| proto::FrameTransforms::decode(&m.4[..]).unwrap()).collect()
 }
 
+/// Every frame's origin in `g1/world` (m), composed down the tree of one `/robot/tf` message
+/// (each body in its parent's frame, parents first).
+fn robot_origins(msg: &proto::FrameTransforms) -> BTreeMap<String, nalgebra::Vector3<f64>> {
+    use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+    let mut at = BTreeMap::from([("g1/world".to_string(), (UnitQuaternion::identity(), Vector3::zeros()))]);
+    for t in &msg.transforms[1..] {
+        let (r, p) = at[&t.parent_frame_id];
+        let (q, v) = (t.rotation.unwrap(), t.translation.unwrap());
+        let local = UnitQuaternion::from_quaternion(Quaternion::new(q.w, q.x, q.y, q.z));
+        at.insert(t.child_frame_id.clone(), (r * local, p + r * Vector3::new(v.x, v.y, v.z)));
+    }
+    at.into_iter().map(|(k, (_, p))| (k, p)).collect()
+}
+
+/// How far a composed origin may be from the body's position: each link's transform is on the
+/// 2⁻¹⁵ grid (30 µm, 30 µrad per quaternion component), composed over chains of up to 8 links
+/// a few decimetres long.
+const TREE_TOLERANCE: f64 = 5e-4;
+
 const EXTS: [&str; 4] = ["pkl", "csv", "npz", "json"];
 
 #[test]
@@ -98,10 +117,11 @@ fn convert_with_a_robot_adds_its_files_and_channels_and_copies_every_other_recor
         let tf = robot_tf(&b);
         assert_eq!(tf.len(), done.motion.body_pos_w.len());
         for (k, msg) in tf.iter().enumerate() {
-            for (b, want) in done.motion.body_pos_w[k].iter().enumerate() {
-                let p = msg.transforms[b + 1].translation.unwrap();
-                let err = (p.x - want[0]).abs().max((p.y - want[1]).abs()).max((p.z - want[2]).abs());
-                assert!(err <= 0.5 / 32768.0 + 1e-9, "{t} frame {k} body {b}: off by {err} m");
+            let origins = robot_origins(msg);
+            for (name, want) in done.motion.body_names.iter().zip(&done.motion.body_pos_w[k]) {
+                let p = origins[&format!("g1/{name}")];
+                let err = (p - nalgebra::Vector3::from(*want)).amax();
+                assert!(err <= TREE_TOLERANCE, "{t} frame {k} body {name}: off by {err} m");
             }
         }
     }
@@ -123,7 +143,8 @@ fn robot_tf_holds_every_body_pose_of_the_retargeted_motion_beside_the_human() {
     assert!(o.status.code().is_some_and(|c| c == 0 || c == 2), "{}", String::from_utf8_lossy(&o.stderr));
     let tf = robot_tf(&mcap);
     assert_eq!(tf.len(), 120);
-    // The offset: `world → g1/world`, then every body in `g1/world`.
+    // The offset: `world → g1/world`, then every body in its parent's frame (the pelvis in
+    // `g1/world`).
     let first = &tf[0].transforms;
     assert_eq!((first[0].parent_frame_id.as_str(), first[0].child_frame_id.as_str()), ("world", "g1/world"));
     assert_eq!(first[0].translation.unwrap(), proto::Vector3 { x: 0.0, y: 1.0, z: 0.0 });
@@ -134,14 +155,14 @@ fn robot_tf_holds_every_body_pose_of_the_retargeted_motion_beside_the_human() {
     let done = setup.retarget(&take).unwrap();
     let names = &done.motion.body_names;
     assert_eq!(first.len(), 1 + names.len());
+    let parents: Vec<&str> = first[1..].iter().map(|t| t.parent_frame_id.as_str()).collect();
+    assert_eq!(parents[..2], ["g1/world", "g1/pelvis"]);
     for (k, msg) in tf.iter().enumerate().step_by(17) {
+        let origins = robot_origins(msg);
         for (b, name) in names.iter().enumerate() {
-            let t = &msg.transforms[b + 1];
-            assert_eq!((t.parent_frame_id.as_str(), t.child_frame_id.clone()), ("g1/world", format!("g1/{name}")));
-            let p = t.translation.unwrap();
-            let want = done.motion.body_pos_w[k][b];
-            let err = (p.x - want[0]).abs().max((p.y - want[1]).abs()).max((p.z - want[2]).abs());
-            assert!(err <= 1.0 / 65536.0 + 1e-12, "frame {k} body {name}: off by {err} m");
+            assert_eq!(msg.transforms[b + 1].child_frame_id, format!("g1/{name}"));
+            let err = (origins[&format!("g1/{name}")] - nalgebra::Vector3::from(done.motion.body_pos_w[k][b])).amax();
+            assert!(err <= TREE_TOLERANCE, "frame {k} body {name}: off by {err} m");
         }
     }
     // Again, with the robot where the human is: replaced, not added.

@@ -343,6 +343,7 @@ def convert(
     dataset: Optional[str] = None,
     progress_every: float = 1.0,
     lanes: Optional[int] = None,
+    robot: Optional[str] = None,
 ) -> Dict[str, Any]:
     """Converts every trial of the datasets in ``config`` (a ``datasets.toml``) to one MCAP file
     under ``out``, as ``smocap convert``; returns the summary (``--report-json``'s content).
@@ -354,5 +355,9 @@ def convert(
     ``frames_total``, ``subjects_calibrated``, ``subjects_total``, ``calibration_s`` and
     ``solve_s`` (the workers' time so far), ``elapsed_s``. Failed trials are listed in the
     summary with their reason;
-    a run that cannot start raises :class:`ArchiveError`.
+    a run that cannot start raises :class:`ArchiveError`. ``robot`` (a shipped robot, ``"g1"``,
+    or a mapping file; an unknown one raises :class:`ModelError`) retargets every converted trial
+    onto it, as ``smocap convert --robot``: ``<trial>.<robot>.pkl``, ``.csv``, ``.npz``,
+    ``.json`` beside each ``<trial>.mcap`` and the robot's channels in it; each trial's
+    ``robot`` entry (``status``, ``note``) says what became of it.
     """

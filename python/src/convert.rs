@@ -6,6 +6,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use smocap::archive::config::read_datasets;
+use smocap::archive::hook::TrialHook;
 use smocap::archive::progress::{status_line, Progress, Snapshot};
 use smocap::archive::shard::Shard;
 use smocap::archive::{convert as convert_archive, ConvertOptions};
@@ -64,9 +65,12 @@ impl Reporter {
 /// `trials_total`, `trials_failed`, `frames_done`, `frames_total`, `subjects_calibrated`,
 /// `subjects_total`, `calibration_s` and `solve_s` (the workers' time so far), `elapsed_s`. Failed trials
 /// are listed in the summary with their reason; a run that cannot start raises ArchiveError.
+/// `robot` (a shipped robot, `"g1"`, or a mapping file) retargets every converted trial onto it,
+/// as `smocap convert --robot`: `<trial>.<robot>.pkl`, `.csv`, `.npz`, `.json` beside each
+/// `<trial>.mcap` and the robot's channels in it; each trial's `robot` entry says what became of it.
 #[pyfunction]
 #[pyo3(signature = (config, out, jobs = None, resume = false, shard = None,
-    backend = "cpu", progress = None, dataset = None, progress_every = 1.0, lanes = None))]
+    backend = "cpu", progress = None, dataset = None, progress_every = 1.0, lanes = None, robot = None))]
 #[allow(clippy::too_many_arguments)]
 pub fn convert<'py>(
     py: Python<'py>,
@@ -80,6 +84,7 @@ pub fn convert<'py>(
     dataset: Option<String>,
     progress_every: f64,
     lanes: Option<usize>,
+    robot: Option<&str>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let archive_err = |e: &(dyn std::error::Error + 'static)| ArchiveError::new_err(message(e));
     let choice = crate::subject::parse_backend(backend)?;
@@ -94,6 +99,15 @@ pub fn convert<'py>(
     let shard = match shard {
         Some(s) => Some(s.parse::<Shard>().map_err(|e| PyValueError::new_err(format!("shard {s:?}: {e}")))?),
         None => Shard::from_env(|k| std::env::var(k).ok()).map_err(|e| archive_err(&e))?,
+    };
+    let hook = match robot {
+        Some(r) => {
+            let setup = smocap::cli::robot::RobotSetup::load(r, None, None)
+                .map_err(|e| crate::errors::ModelError::new_err(format!("{e:#}")))?;
+            let writer = Default::default();
+            Some(Arc::new(smocap::cli::robot::ConvertHook { setup, writer }) as Arc<dyn TrialHook>)
+        }
+        None => None,
     };
     let reporter = Reporter {
         callback: progress,
@@ -119,7 +133,7 @@ pub fn convert<'py>(
             backend,
             lanes,
             label_qc: None,
-            hook: None,
+            hook,
         };
         // A status line every `every` while the conversion runs, as the command line prints
         // when stderr is not a terminal.

@@ -64,3 +64,23 @@ def test_retarget_report_is_the_command_lines(cli, converted, tmp_path):
 def test_an_unknown_robot_is_a_model_error(converted):
     with pytest.raises(smocap.ModelError, match="neither a shipped robot"):
         smocap.read_trial(converted).retarget("h1_from_nowhere")
+
+
+def test_convert_with_a_robot_writes_its_files_beside_each_trial_as_the_command_line(tmp_path):
+    (tmp_path / "datasets.toml").write_text(DATASETS)
+    summary = smocap.convert(tmp_path / "datasets.toml", tmp_path / "out", jobs=2, robot="g1")
+    [trial] = summary["trials"]
+    assert trial["robot"]["status"] in ("ok", "suspect"), trial["robot"]
+    stem = tmp_path / "out" / "synthetic" / "subj01" / "walk01.g1"
+    for ext in ("pkl", "csv", "npz", "json"):
+        assert stem.with_name(f"walk01.g1.{ext}").is_file(), ext
+    report = json.loads(stem.with_name("walk01.g1.json").read_text())
+    assert report["frames"] == 120 and report["range_violations"] == 0
+    with np.load(stem.with_name("walk01.g1.npz")) as z:
+        assert z["qpos"].shape == (120, 7 + 29)
+
+
+def test_convert_with_an_unknown_robot_is_a_model_error(tmp_path):
+    (tmp_path / "datasets.toml").write_text(DATASETS)
+    with pytest.raises(smocap.ModelError, match="neither a shipped robot"):
+        smocap.convert(tmp_path / "datasets.toml", tmp_path / "out", robot="h1_from_nowhere")

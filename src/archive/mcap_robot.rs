@@ -4,9 +4,11 @@
 //!
 //! Frames: `world → <robot>/world` is the robot's lateral offset ([`RobotTrack::offset`], a pure
 //! translation, Z up; 0 by default: the robot walks where the human walks), then each body
-//! `<robot>/world → <robot>/<body>` is the body's pose in the robot's world, as MuJoCo's
-//! `xpos`/`xquat` would give it (the robot's world is the human's `world`: Z up, the same
-//! origin). Log times: each robot frame at the log time of the human frame it was retargeted
+//! `<robot>/<parent> → <robot>/<body>` is the body's pose in its parent body's frame (the root's
+//! in `<robot>/world`): the kinematic tree, as the human's `/tf` is written. Composed, the poses
+//! are MuJoCo's `xpos`/`xquat` (the robot's world is the human's `world`: Z up, the same
+//! origin). A hinge child's translation is the same in every frame, so the chunks compress to
+//! half the size of world poses. Log times: each robot frame at the log time of the human frame it was retargeted
 //! from (that frame's `/smocap/state` message), so the two play in step.
 //!
 //! Two ways in: `smocap convert --robot` writes the robot into the trial's file as it is
@@ -29,7 +31,8 @@ use std::collections::BTreeMap;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
-/// `/robot/tf`: per frame, every robot body in `<robot>/world`, and that frame in `world`.
+/// `/robot/tf`: per frame, every robot body in its parent's frame (the root in `<robot>/world`),
+/// and that frame in `world`.
 pub const ROBOT_TF: ChannelSpec = ChannelSpec {
     topic: "/robot/tf",
     schema: "foxglove.FrameTransforms",
@@ -66,6 +69,8 @@ pub struct RobotTrack {
     pub name: String,
     /// Body names (the robot's body order).
     pub bodies: Vec<String>,
+    /// Each body's parent body (`None`: the robot's world).
+    pub parents: Vec<Option<usize>>,
     /// The human frame index (`/smocap/state`'s `frame`) each robot frame was retargeted from.
     pub frames: Vec<usize>,
     /// Per frame, per body: orientation and origin in the robot's world (Z up, m).
@@ -219,7 +224,8 @@ fn state_frame(m: &mcap::Message) -> Option<usize> {
     }
 }
 
-/// Frame `k`'s `/robot/tf` message: `world → <robot>/world`, then every body.
+/// Frame `k`'s `/robot/tf` message: `world → <robot>/world`, then every body in its parent's
+/// frame (bodies in the robot's order: parents first).
 fn tf(track: &RobotTrack, k: usize, ns: u64) -> proto::FrameTransforms {
     let stamp = Some(Timestamp::from_ns(ns));
     let root = format!("{}/world", track.name);
@@ -230,24 +236,35 @@ fn tf(track: &RobotTrack, k: usize, ns: u64) -> proto::FrameTransforms {
         translation: Some(v3(&track.offset)),
         rotation: Some(proto::Quaternion::IDENTITY),
     }];
-    transforms.extend(track.bodies.iter().zip(&track.poses[k]).map(|(b, (r, p))| proto::FrameTransform {
+    transforms.extend(track.bodies.iter().zip(&track.parents).map(|(b, parent)| proto::FrameTransform {
         timestamp: stamp,
-        parent_frame_id: root.clone(),
+        parent_frame_id: parent.map_or(root.clone(), |p| format!("{}/{}", track.name, track.bodies[p])),
         child_frame_id: format!("{}/{b}", track.name),
-        translation: Some(v3(p)),
-        rotation: Some(quat(r)),
+        translation: None,
+        rotation: None,
     }));
-    proto::FrameTransforms { transforms }
+    let mut msg = proto::FrameTransforms { transforms };
+    refill_tf(&mut msg, track, k, ns);
+    msg
 }
 
 /// [`tf`] of frame `k` written over `msg` (a [`tf`] of the same track): times and poses only.
 fn refill_tf(msg: &mut proto::FrameTransforms, track: &RobotTrack, k: usize, ns: u64) {
     let stamp = Some(Timestamp::from_ns(ns));
     msg.transforms[0].timestamp = stamp;
-    for (t, (r, p)) in msg.transforms[1..].iter_mut().zip(&track.poses[k]) {
+    let poses = &track.poses[k];
+    for ((t, (r, p)), parent) in msg.transforms[1..].iter_mut().zip(poses).zip(&track.parents) {
         t.timestamp = stamp;
-        t.translation = Some(v3(p));
-        t.rotation = Some(quat(r));
+        // In the parent body's frame: `(R_pᵀ R, R_pᵀ (p − p_p))`.
+        let (r, p) = match parent {
+            Some(i) => {
+                let (rp, pp) = &poses[*i];
+                (rp.inverse() * r, rp.inverse_transform_vector(&(p - pp)))
+            }
+            None => (*r, *p),
+        };
+        t.translation = Some(v3(&p));
+        t.rotation = Some(quat(&r));
     }
 }
 

@@ -14,7 +14,6 @@
 //! needs and their tests, whose zip and NPY readers check the encoders' byte layouts.
 
 use crate::model::math;
-use std::fmt::Write as _;
 use std::path::Path;
 
 /// A robot's motion in MuJoCo's `qpos` order, sampled at `fps`.
@@ -180,7 +179,10 @@ impl Pickle {
     /// dtype("f8", False, True) BUILD (3, "<", None, None, None, -1, -1, 0), False, data)`,
     /// data the values as little-endian f64. Loaded, it is a writable `ndarray`.
     fn array(&mut self, shape: &[usize], values: impl Iterator<Item = f64>) -> &mut Self {
-        let data: Vec<u8> = values.flat_map(f64::to_le_bytes).collect();
+        let mut data = Vec::with_capacity(shape.iter().product::<usize>() * 8);
+        for v in values {
+            data.extend_from_slice(&v.to_le_bytes());
+        }
         debug_assert_eq!(data.len(), shape.iter().product::<usize>() * 8);
         self.global("numpy.core.multiarray", "_reconstruct").global("numpy", "ndarray");
         self.int(0).op(b"\x85").bytes(b"b").op(b"\x87R(").int(1).op(b"(");
@@ -197,16 +199,20 @@ impl Pickle {
 
 /// Writes mjlab's motion CSV: no header, [`MJLAB_FPS`] (the motion [`resample`]d), one row a
 /// frame: root x y z (m), root quaternion x y z w, the joints in `joint_names` order (rad);
-/// numbers in Rust's shortest round-trip form.
+/// numbers in their shortest round-trip form (ryu: `0.5`, `1e-7`).
 pub fn write_mjlab_csv(path: &Path, m: &RobotMotion) -> Result<(), FilesError> {
     check(path, m, false)?;
     let r = resample(m, MJLAB_FPS);
-    let mut text = String::new();
+    let mut text = String::with_capacity(r.qpos.len() * (7 + m.joint_names.len()) * 24);
+    let mut fmt = ryu::Buffer::new();
     for q in &r.qpos {
         let row = [q[0], q[1], q[2], q[4], q[5], q[6], q[3]].into_iter().chain(q[7..].iter().copied());
         for (i, v) in row.enumerate() {
-            let sep = if i == 0 { "" } else { "," };
-            write!(text, "{sep}{v}").expect("writing to a String");
+            if i > 0 {
+                text.push(',');
+            }
+            // Non-finite values never reach here ([`check`]); ryu writes the shortest round-trip form.
+            text.push_str(fmt.format_finite(v));
         }
         text.push('\n');
     }
@@ -300,7 +306,10 @@ fn npy(descr: &str, shape: &[usize], data: &[u8]) -> Vec<u8> {
 
 /// A little-endian float64 array (`<f8`).
 fn npy_f64(shape: &[usize], values: impl Iterator<Item = f64>) -> Vec<u8> {
-    let data: Vec<u8> = values.flat_map(f64::to_le_bytes).collect();
+    let mut data = Vec::with_capacity(shape.iter().product::<usize>() * 8);
+    for v in values {
+        data.extend_from_slice(&v.to_le_bytes());
+    }
     debug_assert_eq!(data.len(), shape.iter().product::<usize>() * 8);
     npy("<f8", shape, &data)
 }

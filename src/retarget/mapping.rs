@@ -137,12 +137,17 @@ impl Mapping {
         Ok(Mapping { robot: PathBuf::new(), reference: BTreeMap::new(), velocity: BTreeMap::new(), tasks, feet })
     }
 
-    /// Velocity limit (rad/s) of joint `name`: the first matching pattern, else unlimited.
-    pub fn velocity_limit(&self, name: &str) -> f64 {
-        self.velocity
+    /// Velocity limits (rad/s) of the joints `names`: each the first matching pattern's (in the
+    /// patterns' order), else unlimited. Each pattern is compiled once; an invalid one matches
+    /// nothing.
+    pub fn velocity_limits<'n>(&self, names: impl IntoIterator<Item = &'n str>) -> Vec<f64> {
+        let matchers: Vec<(globset::GlobMatcher, f64)> = self
+            .velocity
             .iter()
-            .find(|(pat, _)| globset::Glob::new(pat).is_ok_and(|g| g.compile_matcher().is_match(name)))
-            .map_or(f64::INFINITY, |(_, v)| *v)
+            .filter_map(|(pat, &v)| globset::Glob::new(pat).ok().map(|g| (g.compile_matcher(), v)))
+            .collect();
+        let limit = |name: &str| matchers.iter().find(|(m, _)| m.is_match(name)).map_or(f64::INFINITY, |(_, v)| *v);
+        names.into_iter().map(limit).collect()
     }
 }
 

@@ -55,6 +55,8 @@ pub struct Retargeted {
     pub report: Report,
     /// Robot coordinates per frame (root x y z, z-y-x angles, joints).
     pub q: Vec<Vec<f64>>,
+    /// Per frame, per body: world orientation and origin (m), the forward kinematics of `q`.
+    pub poses: Vec<Vec<(nalgebra::UnitQuaternion<f64>, Vector3<f64>)>>,
     /// The targets and contacts the robot was solved to.
     pub targets: files::TargetRecord,
 }
@@ -171,7 +173,7 @@ pub fn retarget(human: &Human, robot: &Robot, plan: &Plan, settings: &RetargetSe
         all_q.push(q.clone());
     }
     let fps = if n > 1 { (n - 1) as f64 / (human.times[n - 1] - human.times[0]).max(1e-9) } else { 0.0 };
-    let (motion, report) = out.finish(robot, plan, human, &targets, &all_q, fps, settings, name);
+    let (motion, report, poses) = out.finish(robot, plan, human, &targets, &all_q, fps, settings, name);
     let targets = target_record(robot, plan, human, &targets, fps);
-    Retargeted { motion, report, q: all_q, targets }
+    Retargeted { motion, report, q: all_q, poses, targets }
 }

@@ -6,7 +6,7 @@ use super::robot::Robot;
 use super::solve::Solver;
 use super::targets::{Human, Plan, Targets};
 use super::RetargetSettings;
-use nalgebra::Vector3;
+use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// Median and 95th percentile (mm) of one mapped body's distance to its scaled target.
@@ -115,6 +115,8 @@ impl Report {
 pub(super) struct Recorder {
     qpos: Vec<Vec<f64>>,
     body_pos: Vec<Vec<[f64; 3]>>,
+    /// Per frame, per body: world orientation and origin (m), for the MCAP file's `/robot/tf`.
+    poses: Vec<Vec<(UnitQuaternion<f64>, Vector3<f64>)>>,
     /// Per task, per frame: distance to the target (m).
     errors: Vec<Vec<f64>>,
     /// Per foot, per frame: body origin (world) and lowest capsule point above ground (m).
@@ -129,6 +131,7 @@ impl Recorder {
         Recorder {
             qpos: Vec::with_capacity(n),
             body_pos: Vec::with_capacity(n),
+            poses: Vec::with_capacity(n),
             errors: vec![Vec::with_capacity(n); plan.tasks.len()],
             feet: vec![Vec::with_capacity(n); plan.feet.len()],
             closest: Vec::with_capacity(n),
@@ -143,6 +146,10 @@ impl Recorder {
         robot.qpos(&ws.body_rot[0], &ws.body_pos[0], q, &mut qpos);
         self.qpos.push(qpos);
         self.body_pos.push(ws.body_pos.iter().map(|p| [p.x, p.y, p.z]).collect());
+        let pose = |(r, p): (&nalgebra::Matrix3<f64>, &Vector3<f64>)| {
+            (UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(*r)), *p)
+        };
+        self.poses.push(ws.body_rot.iter().zip(&ws.body_pos).map(pose).collect());
         for (k, task) in plan.tasks.iter().enumerate() {
             self.errors[k].push((ws.body_pos[task.robot_body] - t.pos[i][k]).norm());
         }
@@ -155,7 +162,8 @@ impl Recorder {
         self.iterations += used;
     }
 
-    /// The motion and the judged report.
+    /// The motion, the judged report and the body poses.
+    #[allow(clippy::type_complexity)]
     #[allow(clippy::too_many_arguments)]
     pub fn finish(
         self,
@@ -167,7 +175,7 @@ impl Recorder {
         fps: f64,
         settings: &RetargetSettings,
         name: &str,
-    ) -> (RobotMotion, Report) {
+    ) -> (RobotMotion, Report, Vec<Vec<(UnitQuaternion<f64>, Vector3<f64>)>>) {
         let n = q.len();
         let rm = &robot.model;
         let hname = |b: usize| human.model.bodies[b].name.clone();
@@ -266,7 +274,7 @@ impl Recorder {
             body_names: rm.bodies.iter().map(|b| b.name.clone()).collect(),
             body_pos_w: self.body_pos,
         };
-        (motion, report)
+        (motion, report, self.poses)
     }
 }
 

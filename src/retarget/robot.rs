@@ -6,7 +6,7 @@ use super::mapping::Mapping;
 use super::RetargetError;
 use crate::io::mjcf::{parse_mjcf_document, read_mjcf_document, GeomShape, MjcfDocument};
 use crate::model::{CoordinateKind, Model};
-use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 
 /// A collision capsule on a robot body, in the body's frame (m); a sphere has `a == b`.
 #[derive(Clone, Debug)]
@@ -71,8 +71,9 @@ impl Robot {
         }
         let joint_names: Vec<String> = joints.iter().map(|&i| model.coordinates[i].name.clone()).collect();
         let mut velocity = vec![f64::INFINITY; model.nq()];
-        for &i in &joints {
-            velocity[i] = mapping.velocity_limit(&model.coordinates[i].name);
+        let limits = mapping.velocity_limits(joints.iter().map(|&i| model.coordinates[i].name.as_str()));
+        for (&i, v) in joints.iter().zip(limits) {
+            velocity[i] = v;
         }
         let (mut capsules, mut ignored_geoms, mut flags) = (Vec::new(), Vec::new(), Vec::new());
         for g in doc.geoms {
@@ -111,7 +112,8 @@ impl Robot {
     /// MuJoCo `qpos` (root position, root quaternion w x y z, joints) from the root body's
     /// world pose and the coordinates.
     pub fn qpos(&self, root_rot: &Matrix3<f64>, root_pos: &Vector3<f64>, q: &[f64], out: &mut Vec<f64>) {
-        let quat = UnitQuaternion::from_matrix(root_rot);
+        // The root's orientation from forward kinematics is orthonormal to rounding.
+        let quat = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(*root_rot));
         let quat = if quat.w < 0.0 { -quat.into_inner() } else { quat.into_inner() };
         out.clear();
         out.extend_from_slice(root_pos.as_slice());

@@ -121,11 +121,18 @@ pub struct Targets {
 }
 
 /// Human joint centres and orientations (world) of state `q`.
-fn human_frame(h: &Human, q: &[f64], ws: &mut Workspace, y: &mut Vec<f64>) -> (Vec<Vector3<f64>>, Vec<Matrix3<f64>>) {
+fn human_frame(
+    h: &Human,
+    q: &[f64],
+    ws: &mut Workspace,
+    y: &mut Vec<f64>,
+    bodies: &[usize],
+) -> (Vec<Vector3<f64>>, Vec<Matrix3<f64>>) {
     y.clear();
     y.extend_from_slice(q);
     y.extend_from_slice(h.scales);
-    cpu::forward(h.model, y, ws);
+    // The bodies only: the markers are not needed.
+    cpu::forward_part(h.model, y, ws, bodies, &[]);
     let w = *h.world_from_model.to_rotation_matrix().matrix();
     let centres = (0..h.model.nb())
         .map(|b| {
@@ -164,7 +171,8 @@ impl Plan {
         robot.state(&reference, &mut y);
         cpu::forward(rm, &y, &mut rws);
         let mut hws = Workspace::new(human.model);
-        let (hc, hr) = human_frame(human, &human_reference(human.model), &mut hws, &mut y);
+        let all: Vec<usize> = (0..human.model.nb()).collect();
+        let (hc, hr) = human_frame(human, &human_reference(human.model), &mut hws, &mut y, &all);
 
         let mut tasks = Vec::<PlannedTask>::new();
         // Tasks whose human body is missing (a model without arms) are left out.
@@ -256,7 +264,8 @@ impl Plan {
         let n = human.q.len();
         let mut ws = Workspace::new(human.model);
         let mut y = Vec::new();
-        let frames: Vec<_> = human.q.iter().map(|q| human_frame(human, q, &mut ws, &mut y)).collect();
+        let bodies: Vec<usize> = (0..human.model.nb()).collect();
+        let frames: Vec<_> = human.q.iter().map(|q| human_frame(human, q, &mut ws, &mut y, &bodies)).collect();
         let standing = |body: usize| percentile(frames.iter().map(|(c, _)| c[body].z).collect(), 0.05);
         let heel_floor = self.feet.iter().map(|f| standing(f.heel)).fold(f64::INFINITY, f64::min);
         let heel_floor = if heel_floor.is_finite() { heel_floor } else { 0.0 };

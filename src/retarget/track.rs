@@ -1,36 +1,20 @@
 //! A retargeted trial as the MCAP file shows it ([`crate::archive::mcap_robot`]): every robot
-//! body's world pose per frame (forward kinematics of [`Retargeted::q`] at unit scales) and the
-//! robot's collision capsules.
+//! body's world pose per frame ([`Retargeted::poses`]) and the robot's collision capsules.
 
 use super::{Report, Retargeted, Robot};
 use crate::archive::mcap_robot::{RobotTrack, TrackCapsule};
-use crate::kinematics::cpu::{self, Workspace};
-use nalgebra::{Rotation3, UnitQuaternion, Vector3};
+use nalgebra::Vector3;
 use std::collections::BTreeMap;
 
 /// The track of `done` (retargeted from the human frames `frames`, one per robot frame) for a
 /// robot called `name` (its frame prefix), its world `offset` (m) from the human's `world`.
 pub fn track(robot: &Robot, name: &str, done: &Retargeted, frames: &[usize], offset: Vector3<f64>) -> RobotTrack {
     let model = &robot.model;
-    let mut ws = Workspace::new(model);
-    let mut y = Vec::with_capacity(model.ny());
-    let poses = done
-        .q
-        .iter()
-        .map(|q| {
-            robot.state(q, &mut y);
-            cpu::forward(model, &y, &mut ws);
-            (0..model.nb())
-                .map(|b| {
-                    let r = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(ws.body_rot[b]));
-                    (r, ws.body_pos[b])
-                })
-                .collect()
-        })
-        .collect();
+    let poses = done.poses.clone();
     RobotTrack {
         name: name.to_string(),
         bodies: model.bodies.iter().map(|b| b.name.clone()).collect(),
+        parents: model.bodies.iter().map(|b| b.parent).collect(),
         frames: frames.to_vec(),
         poses,
         capsules: robot
