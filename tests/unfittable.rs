@@ -31,8 +31,17 @@ const WINDOWS: [(&[&str], std::ops::Range<usize>, [f64; 3]); 3] = [
 
 #[test]
 fn displaced_segments_are_reported_as_bad_data_and_the_trial_does_not_fail() {
+    // Seed 19: a barely observed coordinate left where a window's free poses put it, until the
+    // frames after a continued run were solved again from it (`jumps::carry_on`).
+    for seed in [11, 19] {
+        displaced_segments_with(seed);
+    }
+}
+
+fn displaced_segments_with(seed: u64) {
+    eprintln!("seed {seed}");
     let ctx = Context::shipped().unwrap();
-    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 300, seed: 11, ..SynthOptions::default() });
+    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 300, seed, ..SynthOptions::default() });
     let cal = calibrate_subject(&ctx, &[("walk", &s.trial)]).unwrap();
     let clean = solve_trial(&ctx, "walk", &s.trial, &cal, 1).unwrap();
     assert!(clean.marker_errors.unfittable.is_empty(), "{:?}", clean.marker_errors.unfittable);

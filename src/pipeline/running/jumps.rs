@@ -20,8 +20,9 @@ use crate::solve::{FrameSolver, FrameStatus, SolverSettings};
 /// no better), or else when their RMS marker RMSE over the run is at most
 /// [`CONTINUED_FIT_RATIO`] times the free poses' (no pose fits, so the one continuing the motion
 /// is as good). Fittable frames are never
-/// touched (a clean fast swing is followed). Deterministic, in frame order, on the CPU. Returns
-/// the frames whose continued pose was kept.
+/// touched (a clean fast swing is followed), except those right after a kept run, which are
+/// solved again from it ([`carry_on`]). Deterministic, in frame order, on the CPU. Returns the
+/// frames whose continued or re-solved pose was kept.
 pub fn resolve_unfittable_jumps(
     eval: &Evaluator<'_>,
     settings: &SolverSettings,
@@ -110,7 +111,53 @@ fn continue_run(
             kept.push(a + i);
         }
     }
-    charge(results, a, &spent, kept)
+    let mut kept = charge(results, a, &spent, kept);
+    if !kept.is_empty() {
+        kept.extend(carry_on(lane, inp, limits, results, b));
+    }
+    kept
+}
+
+/// A re-solved frame whose every proxy comes out within this of its first solve's (rad, or m
+/// and scale for the others) is the same pose: the frames after it are left as they are.
+const SAME_POSE: f64 = 1e-3;
+
+/// The frames after a run whose continued poses were kept (from `b` on) were solved from the
+/// run's free poses, and their pose prior held them there: a barely observed coordinate
+/// (forearm pronation) can stay where those poses left it for many frames. Each is solved again,
+/// as the trial's pass solves it, from the frames before it (now the continued ones), and its
+/// new pose kept when it fits about as well ([`CONTINUED_FIT_RATIO`] of the first solve's
+/// RMSE, and still fittable); this stops at the first frame whose pose comes out the same ([`SAME_POSE`]), or one
+/// that does not fit, was not solved or ends the segment. Returns the frames whose pose changed.
+fn carry_on(
+    lane: &mut Lane<'_>,
+    inp: &TrialInputs<'_>,
+    limits: &JumpLimits,
+    results: &mut [Option<FrameResult>],
+    b: usize,
+) -> Vec<usize> {
+    let presolve = lane.solver.settings.presolve == crate::solve::Presolve::Always;
+    let mut kept = Vec::new();
+    for g in b..results.len() {
+        let pose = |h: usize| solved(&results[h]).map(|r| r.0.clone());
+        let (Some(prev), Some(old)) = (pose(g - 1), solved(&results[g])) else { break };
+        if old.1.rmse_m > limits.unfittable_m {
+            break;
+        }
+        let (old_rmse, old_p) = (old.1.rmse_m, old.0.clone());
+        let prev2 = if g >= 2 { pose(g - 2) } else { None };
+        let (stats, secs) = lane.solve_again(inp, g, (prev, prev2), presolve, |_| {});
+        let r = results[g].as_mut().expect("a solved frame");
+        r.2 += secs;
+        let same = lane.p.iter().zip(&old_p).all(|(x, y)| (x - y).abs() <= SAME_POSE);
+        let worse = stats.rmse_m > (CONTINUED_FIT_RATIO * old_rmse).min(limits.unfittable_m);
+        if stats.status == FrameStatus::TooFewMarkers || same || worse {
+            break;
+        }
+        *r = (lane.p.clone(), stats, r.2);
+        kept.push(g);
+    }
+    kept
 }
 
 /// The course of the motion at frame `g` into `course`: the linear interpolation between the
