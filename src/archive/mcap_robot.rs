@@ -8,8 +8,8 @@
 //! in `<robot>/world`): the kinematic tree, as the human's `/tf` is written. Composed, the poses
 //! are MuJoCo's `xpos`/`xquat` (the robot's world is the human's `world`: Z up, the same
 //! origin). A hinge child's translation is the same in every frame, so the chunks compress to
-//! half the size of world poses. Log times: each robot frame at the log time of the human frame it was retargeted
-//! from (that frame's `/smocap/state` message), so the two play in step.
+//! half the size of world poses. Log times: each robot frame at the log time of the human frame
+//! it was retargeted from (that frame's `/smocap/state` message), so the two play in step.
 //!
 //! Two ways in: `smocap convert --robot` writes the robot into the trial's file as it is
 //! finished ([`write_track`]: the robot's messages after the human's, in their own chunks);
