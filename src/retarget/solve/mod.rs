@@ -77,6 +77,14 @@ pub struct Pin {
 /// ([`Solver::list_pairs`]): a frame's steps rarely move an end by more.
 const LIST_SLACK: f64 = 0.03;
 
+/// How many measured step contractions a frame's first step borrows from
+/// ([`Solver::borrowed_contraction`]).
+const CONTRACTIONS: usize = 4;
+
+/// The share of the tolerance a borrowed contraction's estimate must stay under (the estimate
+/// is another frame's).
+const BORROWED_MARGIN: f64 = 0.5;
+
 /// The distance (m) from a body's origin at which its turn counts as motion in the convergence
 /// test ([`SolveSettings::tolerance`]): a link's size.
 const BODY_RADIUS: f64 = 0.1;
@@ -123,6 +131,12 @@ pub struct Solver<'a> {
     sticky: Vec<bool>,
     /// A ground or collision row came on in the last assembly.
     activated: bool,
+    /// The last measured contractions of the steps (`ρ`, a step over the one before it), newest
+    /// first: their largest estimates what a frame's first step leaves to come
+    /// ([`Solver::borrowed_contraction`]).
+    contractions: [f64; CONTRACTIONS],
+    /// Frames ended after their first step on a borrowed contraction since the last measured one.
+    unmeasured: usize,
     /// Per capsule end (2 per capsule) of a foot: came below the ground margin in this frame;
     /// its row stays (lifting, or holding it at the margin) for the frame's remaining iterations.
     grounded: Vec<bool>,
@@ -159,6 +173,8 @@ impl<'a> Solver<'a> {
             listed_at: vec![(Vector3::repeat(f64::INFINITY), Vector3::zeros()); robot.capsules.len()],
             sticky: vec![false; robot.pairs.len()],
             activated: false,
+            contractions: [f64::INFINITY; CONTRACTIONS],
+            unmeasured: 0,
             grounded: vec![false; 2 * robot.capsules.len()],
         }
     }
@@ -279,8 +295,22 @@ impl<'a> Solver<'a> {
                 // when the steps still to come cannot: shrinking by `ρ`, they add up to
                 // `step ρ / (1 − ρ)`.
                 let (step, tol) = (self.body_motion(), self.settings.tolerance);
-                let rho = step / last;
-                if used == n || step < tol || (last.is_finite() && rho < 0.5 && step * rho / (1.0 - rho) < tol) {
+                if last.is_finite() {
+                    // Measured: remembered for the next frames' first steps.
+                    self.contractions.rotate_right(1);
+                    self.contractions[0] = step / last;
+                    self.unmeasured = 0;
+                }
+                let small = |rho: f64, tol: f64| rho < 0.5 && step * rho / (1.0 - rho) < tol;
+                let settled = if last.is_finite() {
+                    small(step / last, tol)
+                } else {
+                    // After the first step: on a contraction borrowed from the last frames, with
+                    // a margin.
+                    step >= tol && self.borrowed_contraction().is_some_and(|rho| small(rho, BORROWED_MARGIN * tol))
+                };
+                if used == n || step < tol || settled {
+                    self.unmeasured += usize::from(used == 1 && settled);
                     break;
                 }
                 last = step;
@@ -311,6 +341,38 @@ impl<'a> Solver<'a> {
         }
         self.settings.collision = base;
         used
+    }
+
+    /// After a frame's first step, `ρ` is not measured yet: the largest of the last
+    /// [`CONTRACTIONS`] measured (the steps of neighbouring frames contract alike), unless a
+    /// ground or collision row came on or is to come on (the problem changed), or
+    /// [`CONTRACTIONS`] frames in a row already ended on a borrowed one (one is measured again).
+    fn borrowed_contraction(&self) -> Option<f64> {
+        if self.unmeasured >= CONTRACTIONS || self.activated || self.rows_to_come() {
+            return None;
+        }
+        Some(self.contractions.iter().fold(0.0_f64, |m, &r| m.max(r)))
+    }
+
+    /// Whether a ground or collision row not yet held would come on at the last
+    /// [`Solver::forward`]: a foot's capsule end below the ground margin, or a listed pair within
+    /// the collision margin.
+    fn rows_to_come(&self) -> bool {
+        let (mg, ms) = (self.settings.ground_margin, self.settings.collision_margin);
+        for (k, c) in self.robot.capsules.iter().enumerate() {
+            if self.plan.feet.iter().any(|f| f.robot_body == c.body) {
+                let (a, b) = self.ends[k];
+                let low = |z: f64, e: usize| z - c.radius < mg && !self.grounded[2 * k + e];
+                if low(a.z, 0) || low(b.z, 1) {
+                    return true;
+                }
+            }
+        }
+        self.listed.iter().any(|&p| {
+            let (i, j) = self.robot.pairs[p];
+            let ((bi, ri), (bj, rj)) = (self.bounds[i], self.bounds[j]);
+            !self.sticky[p] && (bi - bj).norm_squared() <= (ri + rj + ms).powi(2) && self.pair_distance(i, j).0 < ms
+        })
     }
 
     /// How far the last step moved the bodies (m): the largest over bodies of the origin's
