@@ -62,6 +62,9 @@ pub struct TrackCapsule {
     pub radius: f64,
 }
 
+/// Per frame, per body: orientation and origin in the robot's world (Z up, m).
+pub type BodyPoses = Vec<Vec<(UnitQuaternion<f64>, Vector3<f64>)>>;
+
 /// A robot's motion as the MCAP file shows it.
 #[derive(Clone, Debug)]
 pub struct RobotTrack {
@@ -73,8 +76,7 @@ pub struct RobotTrack {
     pub parents: Vec<Option<usize>>,
     /// The human frame index (`/smocap/state`'s `frame`) each robot frame was retargeted from.
     pub frames: Vec<usize>,
-    /// Per frame, per body: orientation and origin in the robot's world (Z up, m).
-    pub poses: Vec<Vec<(UnitQuaternion<f64>, Vector3<f64>)>>,
+    pub poses: BodyPoses,
     pub capsules: Vec<TrackCapsule>,
     /// Where the robot's world origin sits in `world` (m; e.g. `[0, 1, 0]`: 1 m to the left of a
     /// human walking along +x).
@@ -259,7 +261,8 @@ fn refill_tf(msg: &mut proto::FrameTransforms, track: &RobotTrack, k: usize, ns:
         let (r, p) = match parent {
             Some(i) => {
                 let (rp, pp) = &poses[*i];
-                (rp.inverse() * r, rp.inverse_transform_vector(&(p - pp)))
+                let to_parent = rp.inverse();
+                (to_parent * r, to_parent * (p - pp))
             }
             None => (*r, *p),
         };

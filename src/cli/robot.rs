@@ -101,7 +101,13 @@ impl RobotSetup {
         done: &Retargeted,
         w: &WriterOptions,
     ) -> anyhow::Result<()> {
-        let track = retarget::track::track(&self.robot, &self.name, done, &take.frames, self.offset);
+        let track = retarget::track::track(
+            &self.robot,
+            &self.name,
+            (done.poses.clone(), &done.report),
+            &take.frames,
+            self.offset,
+        );
         mcap_robot::add_robot_to(buf, mcap, &track, w)?;
         Ok(())
     }
@@ -187,9 +193,17 @@ impl TrialHook for ConvertHook {
         let human =
             Human { model: m.model, scales: m.scales, q: m.q, times: m.times, world_from_model: m.world_from_model };
         let start = std::time::Instant::now();
-        let done = self.setup.retarget_human(&human, m.name).map_err(|e| format!("{}: {e}", self.setup.name))?;
+        let mut done = self.setup.retarget_human(&human, m.name).map_err(|e| format!("{}: {e}", self.setup.name))?;
         let seconds = start.elapsed().as_secs_f64();
-        let track = retarget::track::track(&self.setup.robot, &self.setup.name, &done, m.frames, self.setup.offset);
+        // The poses go into the file's track; the files that follow need the rest.
+        let poses = std::mem::take(&mut done.poses);
+        let track = retarget::track::track(
+            &self.setup.robot,
+            &self.setup.name,
+            (poses, &done.report),
+            m.frames,
+            self.setup.offset,
+        );
         Ok(HookWork { track, payload: Box::new((done, seconds)) })
     }
 

@@ -179,11 +179,7 @@ impl Pickle {
     /// dtype("f8", False, True) BUILD (3, "<", None, None, None, -1, -1, 0), False, data)`,
     /// data the values as little-endian f64. Loaded, it is a writable `ndarray`.
     fn array(&mut self, shape: &[usize], values: impl Iterator<Item = f64>) -> &mut Self {
-        let mut data = Vec::with_capacity(shape.iter().product::<usize>() * 8);
-        for v in values {
-            data.extend_from_slice(&v.to_le_bytes());
-        }
-        debug_assert_eq!(data.len(), shape.iter().product::<usize>() * 8);
+        let data = le_f64(shape, values);
         self.global("numpy.core.multiarray", "_reconstruct").global("numpy", "ndarray");
         self.int(0).op(b"\x85").bytes(b"b").op(b"\x87R(").int(1).op(b"(");
         for &d in shape {
@@ -306,12 +302,17 @@ fn npy(descr: &str, shape: &[usize], data: &[u8]) -> Vec<u8> {
 
 /// A little-endian float64 array (`<f8`).
 fn npy_f64(shape: &[usize], values: impl Iterator<Item = f64>) -> Vec<u8> {
+    npy("<f8", shape, &le_f64(shape, values))
+}
+
+/// The bytes of `values`, an array of `shape` in C order, as little-endian float64.
+fn le_f64(shape: &[usize], values: impl Iterator<Item = f64>) -> Vec<u8> {
     let mut data = Vec::with_capacity(shape.iter().product::<usize>() * 8);
     for v in values {
         data.extend_from_slice(&v.to_le_bytes());
     }
     debug_assert_eq!(data.len(), shape.iter().product::<usize>() * 8);
-    npy("<f8", shape, &data)
+    data
 }
 
 /// A 1-D unicode array (`<U{n}`, n the longest name in characters, at least 1): each name as

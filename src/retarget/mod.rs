@@ -56,7 +56,7 @@ pub struct Retargeted {
     /// Robot coordinates per frame (root x y z, z-y-x angles, joints).
     pub q: Vec<Vec<f64>>,
     /// Per frame, per body: world orientation and origin (m), the forward kinematics of `q`.
-    pub poses: Vec<Vec<(nalgebra::UnitQuaternion<f64>, Vector3<f64>)>>,
+    pub poses: crate::archive::mcap_robot::BodyPoses,
     /// The targets and contacts the robot was solved to.
     pub targets: files::TargetRecord,
 }

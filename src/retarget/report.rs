@@ -6,6 +6,7 @@ use super::robot::Robot;
 use super::solve::Solver;
 use super::targets::{Human, Plan, Targets};
 use super::RetargetSettings;
+use crate::archive::mcap_robot::BodyPoses;
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -116,7 +117,7 @@ pub(super) struct Recorder {
     qpos: Vec<Vec<f64>>,
     body_pos: Vec<Vec<[f64; 3]>>,
     /// Per frame, per body: world orientation and origin (m), for the MCAP file's `/robot/tf`.
-    poses: Vec<Vec<(UnitQuaternion<f64>, Vector3<f64>)>>,
+    poses: BodyPoses,
     /// Per task, per frame: distance to the target (m).
     errors: Vec<Vec<f64>>,
     /// Per foot, per frame: body origin (world) and lowest capsule point above ground (m).
@@ -163,7 +164,6 @@ impl Recorder {
     }
 
     /// The motion, the judged report and the body poses.
-    #[allow(clippy::type_complexity)]
     #[allow(clippy::too_many_arguments)]
     pub fn finish(
         self,
@@ -175,7 +175,7 @@ impl Recorder {
         fps: f64,
         settings: &RetargetSettings,
         name: &str,
-    ) -> (RobotMotion, Report, Vec<Vec<(UnitQuaternion<f64>, Vector3<f64>)>>) {
+    ) -> (RobotMotion, Report, BodyPoses) {
         let n = q.len();
         let rm = &robot.model;
         let hname = |b: usize| human.model.bodies[b].name.clone();

@@ -1,16 +1,22 @@
 //! A retargeted trial as the MCAP file shows it ([`crate::archive::mcap_robot`]): every robot
-//! body's world pose per frame ([`Retargeted::poses`]) and the robot's collision capsules.
+//! body's world pose per frame ([`super::Retargeted::poses`]) and the robot's collision capsules.
 
-use super::{Report, Retargeted, Robot};
-use crate::archive::mcap_robot::{RobotTrack, TrackCapsule};
+use super::{Report, Robot};
+use crate::archive::mcap_robot::{BodyPoses, RobotTrack, TrackCapsule};
 use nalgebra::Vector3;
 use std::collections::BTreeMap;
 
-/// The track of `done` (retargeted from the human frames `frames`, one per robot frame) for a
-/// robot called `name` (its frame prefix), its world `offset` (m) from the human's `world`.
-pub fn track(robot: &Robot, name: &str, done: &Retargeted, frames: &[usize], offset: Vector3<f64>) -> RobotTrack {
+/// The track of a retargeted motion with body `poses` ([`super::Retargeted::poses`]) and `report`
+/// (retargeted from the human frames `frames`, one per robot frame) for a robot called `name`
+/// (its frame prefix), its world `offset` (m) from the human's `world`.
+pub fn track(
+    robot: &Robot,
+    name: &str,
+    (poses, report): (BodyPoses, &Report),
+    frames: &[usize],
+    offset: Vector3<f64>,
+) -> RobotTrack {
     let model = &robot.model;
-    let poses = done.poses.clone();
     RobotTrack {
         name: name.to_string(),
         bodies: model.bodies.iter().map(|b| b.name.clone()).collect(),
@@ -23,7 +29,7 @@ pub fn track(robot: &Robot, name: &str, done: &Retargeted, frames: &[usize], off
             .map(|c| TrackCapsule { body: c.body, a: c.a, b: c.b, radius: c.radius })
             .collect(),
         offset,
-        metadata: summary(&done.report),
+        metadata: summary(report),
     }
 }
 

@@ -127,8 +127,9 @@ const SAME_POSE: f64 = 1e-3;
 /// (forearm pronation) can stay where those poses left it for many frames. Each is solved again,
 /// as the trial's pass solves it, from the frames before it (now the continued ones), and its
 /// new pose kept when it fits about as well ([`CONTINUED_FIT_RATIO`] of the first solve's
-/// RMSE, and still fittable); this stops at the first frame whose pose comes out the same ([`SAME_POSE`]), or one
-/// that does not fit, was not solved or ends the segment. Returns the frames whose pose changed.
+/// RMSE, and still fittable); this stops at the first frame whose pose comes out the same
+/// ([`SAME_POSE`]), or one that does not fit, was not solved or ends the segment. Returns the
+/// frames whose pose changed.
 fn carry_on(
     lane: &mut Lane<'_>,
     inp: &TrialInputs<'_>,

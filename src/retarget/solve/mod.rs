@@ -445,7 +445,9 @@ mod tests {
             .collect()
     }
 
-    fn solver_for(robot: &Robot) -> (Plan, SolveSettings) {
+    /// The shipped G1 and a plan with no tasks, for a [`Solver`] with default settings.
+    fn g1() -> (Robot, Plan) {
+        let (_, robot) = shipped("g1").unwrap().unwrap();
         let plan = Plan {
             tasks: vec![],
             feet: vec![],
@@ -454,14 +456,13 @@ mod tests {
             robot_root_height: 0.8,
             human_root_height: 0.9,
         };
-        (plan, SolveSettings::default())
+        (robot, plan)
     }
 
     #[test]
     fn point_jacobians_match_finite_differences_of_forward_kinematics() {
-        let (_, robot) = shipped("g1").unwrap().unwrap();
-        let (plan, settings) = solver_for(&robot);
-        let mut s = Solver::new(&robot, &plan, settings);
+        let (robot, plan) = g1();
+        let mut s = Solver::new(&robot, &plan, SolveSettings::default());
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
         // Not smaller: the rotation log's angle (an arccos) loses digits near zero.
         let h = 1e-4;
@@ -495,9 +496,8 @@ mod tests {
 
     #[test]
     fn collision_rows_move_capsules_apart_at_the_rate_their_normal_predicts() {
-        let (_, robot) = shipped("g1").unwrap().unwrap();
-        let (plan, settings) = solver_for(&robot);
-        let mut s = Solver::new(&robot, &plan, settings);
+        let (robot, plan) = g1();
+        let mut s = Solver::new(&robot, &plan, SolveSettings::default());
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         let h = 1e-7;
         let distance = |s: &Solver, (i, j): (usize, usize)| s.pair_distance(i, j);
