@@ -354,10 +354,10 @@ fn shaped_bodies_are_the_subjects_stature_with_the_markers_on_the_skin() {
         );
         assert!(m.stature_error.abs() < 0.01, "{name}: {}", m.stature_error);
         assert!(m.inside.0 as f64 >= 0.999 * m.inside.1 as f64, "{name}: {:?}", m.inside);
-        // issue 33 asks 99.9 %: the OpenCap walk measures 99.84 %, Rajagopal 99.92 %, the others
-        // 99.97 %; the edges out of range are linear blend skinning's, where bodies turn far
-        // from the A-pose the mesh is bound in (hips, armpits, wrists, knees; printed above)
-        assert!(m.edge_in_range >= 0.998, "{name}: {}", m.edge_in_range);
+        // the edges out of range are linear blend skinning's, where bodies turn far from the
+        // A-pose the mesh is bound in (groin, armpits, knees; printed above): the OpenCap walk
+        // measures 99.91 %, Rajagopal's 99.93 %, the others 99.96 % and more
+        assert!(m.edge_in_range >= 0.999, "{name}: {}", m.edge_in_range);
         assert!(m.volume_min > 0.95 && m.volume_max < 1.05, "{name}: {} {}", m.volume_min, m.volume_max);
         let r = skin_report(&name, mcap, &dir.join(format!("{name}.skin.json")));
         let (med, p90) = (
