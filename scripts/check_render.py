@@ -11,10 +11,12 @@ for every camera and frame (the IoU against a plain one-sample fill, which also 
 edge passes through, is printed too). Then the keypoints,
 re-read from the written files (depth PNG in mm: 0.5 mm quantization allowed): v=0 only outside
 the image or behind the camera; every v=1 keypoint lies more than 1 cm behind the depth buffer
-(but surface keypoints on a tip too thin to be drawn: counted apart);
-a surface keypoint (nose, eyes, ears, toes, heels) with v=2 lies in the mask within 1 cm of the
-buffer, or on an outline (its pixel's centre sees the background or a farther surface, a
-neighbouring pixel the surface it is on: counted apart); a marker with v=2 is not more
+(but a surface keypoint behind a sliver thinner than a pixel: counted apart, confirmed by casting
+its ray against the posed OBJ mesh); a surface keypoint (nose, eyes, ears, toes, heels) with v=2
+lies in the mask within 1 cm of the buffer, or on an outline (its pixel's centre sees the
+background or a farther surface, a neighbouring pixel the surface it is on), or on a rim (its
+neighbours see a nearer flank: its ray, cast against the mesh, meets nothing 1 cm in front of
+it), the last two counted apart; a marker with v=2 is not more
 than 1 cm behind the buffer; a joint centre with v=1 is not on its own segment. pycocotools loads every COCO file; every box contains its visible keypoints.
 
 Needs numpy, OpenCV and pycocotools (`pip install opencv-python-headless numpy pycocotools`).
@@ -37,6 +39,7 @@ from pycocotools.coco import COCO
 
 TOL_M = 0.01
 QUANT_M = 0.0005
+RAY_M = 0.0001  # the point rebuilt from its pixel coordinates and depth
 
 
 def run(smocap, *args):
@@ -81,11 +84,34 @@ def on_outline(mask, depth, px, py, d, tol=TOL_M + QUANT_M):
     return bool(((mask[win] != 0) & (np.abs(depth[win] - d) <= tol)).any())
 
 
+def occluded(verts, faces, cam, x, y, d, tol):
+    """Whether a triangle crosses the ray from the camera centre to the point seen at pixel
+    (x, y) and depth d (m along the camera axis) more than `tol` in front of it (Moller-Trumbore,
+    every face at once)."""
+    k, r, t = np.array(cam["K"]), np.array(cam["R"]), np.array(cam["t"])
+    assert not np.any(cam["dist"]), "the point is rebuilt without lens distortion"
+    p = r.T @ (d * np.linalg.solve(k, [x, y, 1.0]) - t)
+    o = -r.T @ t
+    ray = p - o
+    a, b, c = verts[faces[:, 0]], verts[faces[:, 1]], verts[faces[:, 2]]
+    e1, e2 = b - a, c - a
+    h = np.cross(ray, e2)
+    det = np.einsum("ij,ij->i", e1, h)
+    ok = np.abs(det) > 1e-15
+    det = np.where(ok, det, 1.0)
+    s = (o - a) / det[:, None]
+    u = np.einsum("ij,ij->i", s, h)
+    q = np.cross(s, e1)
+    v = q @ ray
+    hit = np.einsum("ij,ij->i", e2, q)
+    return bool((ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (hit > 0) & (hit < 1 - tol / d)).any())
+
+
 def count(report, key):
     report[key] = report.get(key, 0) + 1
 
 
-def check_keypoints(root, cam, coco_path, report):
+def check_keypoints(root, cam, coco_path, meshes, report):
     with contextlib.redirect_stdout(io.StringIO()):
         coco = COCO(coco_path)
     data = json.load(open(coco_path))
@@ -114,11 +140,14 @@ def check_keypoints(root, cam, coco_path, report):
                 report["bad"].append(f"{coco_path} ann {ann['id']} kp {j}: visible outside its bbox")
             count(report, f"{kind} v={int(v)}")
             behind = m != 0 and d > dd + TOL_M - QUANT_M
+            verts, faces = meshes[im["frame"]]
             if v == 1 and kind == "surface" and not behind:
                 if on_outline(mask, depth, px, py, d, TOL_M - QUANT_M):
                     report["bad"].append(f"{coco_path} ann {ann['id']} surface {j}: v=1 but the surface is drawn there")
+                elif occluded(verts, faces, cam, x, y, d, TOL_M - RAY_M):
+                    count(report, "surface v=1 behind a sliver thinner than a pixel (ray cast)")
                 else:
-                    count(report, "surface v=1 not drawn (a tip covering no pixel centre)")
+                    report["bad"].append(f"{coco_path} ann {ann['id']} surface {j}: v=1 but nothing in front (ray cast)")
             elif v == 1 and not behind:
                 report["bad"].append(f"{coco_path} ann {ann['id']} {kind} {j}: v=1 but not behind the buffer (depth {d:.4f} m, buffer {dd:.4f} m, label {m})")
             if kind == "surface" and v == 2:
@@ -127,6 +156,9 @@ def check_keypoints(root, cam, coco_path, report):
                 elif on_outline(mask, depth, px, py, d):
                     # its pixel's centre sees the background or a surface behind the one it is on
                     count(report, "surface v=2 on an outline (a 3x3 neighbour within 1 cm)")
+                elif not occluded(verts, faces, cam, x, y, d, TOL_M + RAY_M):
+                    # on a rim: its pixel sees past the edge, its neighbours a nearer flank
+                    count(report, "surface v=2 on a rim (ray cast: nothing 1 cm in front)")
                 else:
                     report["bad"].append(f"{coco_path} ann {ann['id']} surface {j}: v=2, depth {d:.4f} m, buffer {dd:.4f} m")
             if kind == "marker" and v == 2 and m != 0 and d > dd + TOL_M + QUANT_M:
@@ -162,8 +194,10 @@ def main():
             run(smocap, "export", trial, "--mesh", meshes, "--frames", ",".join(map(str, frames)))
             stem = os.path.splitext(os.path.basename(trial))[0]
             lo = 1.0
+            posed = {}
             for f in frames:
                 verts, faces = read_obj(os.path.join(meshes, f"{stem}_{f}.obj"))
+                posed[f] = (verts, faces)
                 for cam in cams:
                     mask = cv2.imread(os.path.join(out, cam["name"], "mask", f"{f:06d}.png"), cv2.IMREAD_UNCHANGED) > 0
                     ref = silhouette(verts, faces, cam, a.supersample)
@@ -174,7 +208,7 @@ def main():
                     checked += 1
                     if iou < 0.98:
                         failures.append(f"{trial} frame {f} camera {cam['name']}: IoU {iou:.4f}")
-            anns = sum(check_keypoints(out, c["name"], os.path.join(out, c["name"] + ".coco.json"), report) for c in cams)
+            anns = sum(check_keypoints(out, c, os.path.join(out, c["name"] + ".coco.json"), posed, report) for c in cams)
             print(f"{os.path.relpath(trial, conv)}: {len(frames)} frames x {len(cams)} cameras, IoU min {lo:.4f}, {anns} annotations")
             worst = min(worst, lo)
     bad = report.pop("bad")

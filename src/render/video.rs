@@ -237,7 +237,16 @@ impl Renderer {
                 j if j < ns + nb => Kind::Inside(j - ns),
                 _ => Kind::Marker,
             };
-            let v = visibility::visibility(&px, kind, img, labels);
+            let meshes = || -> Vec<visibility::Mesh> {
+                self.actors
+                    .iter()
+                    .zip(&self.pose)
+                    .map(|(a, (ws, _))| (&ws.vertices[..], &a.body.triangles[..]))
+                    .collect()
+            };
+            let v = visibility::visibility(&px, kind, img, labels, || {
+                visibility::occluded_on_meshes(cam, &p, px.depth, &meshes())
+            });
             out.depths_m.push(px.depth);
             if v == 0 {
                 out.xyv.extend([0.0, 0.0, 0.0]);
