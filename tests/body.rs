@@ -384,3 +384,52 @@ fn shaped_bodies_are_the_subjects_stature_with_the_markers_on_the_skin() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn convert_with_body_measures_every_trial_and_flags_the_subject_whose_body_misses() {
+    let dir = std::env::temp_dir().join(format!("smocap-body-convert-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let run = |extra: &[&str]| {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_smocap"))
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .args(["convert", "datasets.toml", "--dataset", "synthetic", "--quiet", "--body", "--out"])
+            .arg(dir.join("out"))
+            .arg("--report-json")
+            .arg(dir.join("summary.json"))
+            .args(extra)
+            .output()
+            .unwrap();
+        let summary: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap();
+        (o, summary)
+    };
+    let (o, first) = run(&[]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    // the second synthetic subject's head markers stand 3-4 cm off a head of its stature's
+    // height (`smocap synth` draws every segment's scale on its own): said, exit 3
+    assert_eq!(o.status.code(), Some(3), "{stderr}");
+    assert!(stderr.contains("subj02/walk01.trc: body suspect: past the bounds: height − stature"), "{stderr}");
+    for t in first["trials"].as_array().unwrap() {
+        let b = &t["body"];
+        let output = std::path::PathBuf::from(t["output"].as_str().unwrap());
+        assert!(output.with_extension("body.json").exists(), "{output:?}");
+        if t["subject"] == "subj01" {
+            assert_eq!(b["status"], "ok", "{b}");
+            assert!(b["height_minus_stature_mm"].as_f64().unwrap().abs() <= 10.0, "{b}");
+            assert!(b["landmark_median_off_skin_mm"].as_f64().unwrap() <= 8.0, "{b}");
+            assert!(b["landmark_p90_off_skin_mm"].as_f64().unwrap() <= 20.0, "{b}");
+            assert!(b["virtual_marker_error_mm"].as_f64().unwrap() <= 10.0, "{b}");
+        } else {
+            assert_eq!(b["status"], "suspect", "{b}");
+        }
+    }
+    // resumed: the reports are read back, the figures the same
+    let (_, again) = run(&["--resume"]);
+    for (a, b) in first["trials"].as_array().unwrap().iter().zip(again["trials"].as_array().unwrap()) {
+        assert_eq!(a["body"]["height_minus_stature_mm"], b["body"]["height_minus_stature_mm"]);
+        assert_eq!(a["body"]["virtual_marker_error_mm"], b["body"]["virtual_marker_error_mm"]);
+        let expected = if a["body"]["status"] == "ok" { "skipped" } else { "suspect" };
+        assert_eq!(b["body"]["status"], expected);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

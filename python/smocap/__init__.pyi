@@ -344,6 +344,7 @@ def convert(
     progress_every: float = 1.0,
     lanes: Optional[int] = None,
     robot: Optional[str] = None,
+    body: bool = False,
 ) -> Dict[str, Any]:
     """Converts every trial of the datasets in ``config`` (a ``datasets.toml``) to one MCAP file
     under ``out``, as ``smocap convert``; returns the summary (``--report-json``'s content).
@@ -359,5 +360,9 @@ def convert(
     or a mapping file; an unknown one raises :class:`ModelError`) retargets every converted trial
     onto it, as ``smocap convert --robot``: ``<trial>.<robot>.pkl``, ``.csv``, ``.npz``,
     ``.json`` beside each ``<trial>.mcap`` and the robot's channels in it; each trial's
-    ``robot`` entry (``status``, ``note``) says what became of it.
+    ``robot`` entry (``status``, ``note``) says what became of it. ``body`` measures the
+    subject's body mesh on every converted trial, as ``smocap convert --body``:
+    ``<trial>.body.json`` beside each file, and each trial's ``body`` entry (``status``,
+    ``note``, ``height_minus_stature_mm``, ``landmark_median_off_skin_mm``,
+    ``landmark_p90_off_skin_mm``, ``virtual_marker_error_mm``).
     """

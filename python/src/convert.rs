@@ -68,9 +68,12 @@ impl Reporter {
 /// `robot` (a shipped robot, `"g1"`, or a mapping file) retargets every converted trial onto it,
 /// as `smocap convert --robot`: `<trial>.<robot>.pkl`, `.csv`, `.npz`, `.json` beside each
 /// `<trial>.mcap` and the robot's channels in it; each trial's `robot` entry says what became of it.
+/// `body` measures the subject's body mesh on every converted trial, as `smocap convert --body`:
+/// `<trial>.body.json` beside each file and each trial's `body` entry (figures and verdict).
 #[pyfunction]
 #[pyo3(signature = (config, out, jobs = None, resume = false, shard = None,
-    backend = "cpu", progress = None, dataset = None, progress_every = 1.0, lanes = None, robot = None))]
+    backend = "cpu", progress = None, dataset = None, progress_every = 1.0, lanes = None, robot = None,
+    body = false))]
 #[allow(clippy::too_many_arguments)]
 pub fn convert<'py>(
     py: Python<'py>,
@@ -85,6 +88,7 @@ pub fn convert<'py>(
     progress_every: f64,
     lanes: Option<usize>,
     robot: Option<&str>,
+    body: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
     let archive_err = |e: &(dyn std::error::Error + 'static)| ArchiveError::new_err(message(e));
     let choice = crate::subject::parse_backend(backend)?;
@@ -155,7 +159,11 @@ pub fn convert<'py>(
             done.1.notify_all();
             summary
         });
-        let summary = summary.map_err(|e| archive_err(&e))?;
+        let mut summary = summary.map_err(|e| archive_err(&e))?;
+        if body {
+            smocap::cli::skin_report::convert_pass(&mut summary, opt.jobs, resume)
+                .map_err(|e| ArchiveError::new_err(format!("{e:#}")))?;
+        }
         reporter.send("done", &format!("done: {}", reporter.status()));
         Ok(summary)
     })?;

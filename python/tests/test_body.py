@@ -33,3 +33,15 @@ def test_body_of_a_converted_trial(cli, tmp):
     assert 0.03 < volume < 0.15, volume
     # it moves: the frames differ
     assert np.abs(vertices[-1] - vertices[0]).max() > 0.01
+
+
+def test_convert_with_body_measures_it_beside_each_trial(cli, tmp):
+    (tmp / "datasets.toml").write_text(DATASETS)
+    summary = smocap.convert(tmp / "datasets.toml", tmp / "out", jobs=1, body=True)
+    [trial] = summary["trials"]
+    body = trial["body"]
+    assert body["status"] in ("ok", "suspect"), body
+    assert abs(body["height_minus_stature_mm"]) < 50 and body["virtual_marker_error_mm"] < 20, body
+    report = tmp / "out" / "synthetic" / trial["trial"].replace(".trc", ".body.json")
+    assert report.is_file()
+

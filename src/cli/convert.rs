@@ -97,6 +97,13 @@ pub struct ConvertArgs {
     /// where the human is). Its files are not moved.
     #[arg(long, requires = "robot", value_parser = super::robot::parse_offset, value_name = "X,Y[,Z]")]
     pub robot_offset: Option<[f64; 3]>,
+    /// Measure the subject's body mesh on every converted trial: shaped to the subject, posed at
+    /// every frame; writes `<trial>.body.json` (`export --skin-report`'s report) beside
+    /// `<trial>.mcap` and puts its figures (height against stature, landmarks off the skin,
+    /// virtual markers' error) and a verdict in the summary (about 0.6 s a trial). A body
+    /// `suspect` (a figure past its bound) or `failed` makes the exit status 3.
+    #[arg(long)]
+    pub body: bool,
 }
 
 fn parse_epoch(s: &str) -> Result<u64, String> {
@@ -155,7 +162,10 @@ pub fn run(a: ConvertArgs) -> anyhow::Result<u8> {
     let display = Display::start(progress, Mode::auto(a.quiet, every));
     let summary = convert(&datasets, &opt, &|line| display.println(line));
     display.finish();
-    let summary = summary?;
+    let mut summary = summary?;
+    if a.body {
+        super::skin_report::convert_pass(&mut summary, opt.jobs, a.resume)?;
+    }
     print!("{}", summary.table());
     if let Some(p) = &a.report_json {
         std::fs::write(p, serde_json::to_string_pretty(&summary)?)
@@ -177,10 +187,23 @@ pub fn run(a: ConvertArgs) -> anyhow::Result<u8> {
             eprintln!("  {}/{}: {}", t.dataset, t.trial, r.note);
         }
     }
+    let body_bad: Vec<_> = summary
+        .trials
+        .iter()
+        .filter_map(|t| Some((t, t.body.as_ref()?)))
+        .filter(|(_, b)| b.status == "failed" || b.status == "suspect")
+        .collect();
+    if !body_bad.is_empty() {
+        eprintln!("{} trials' bodies are suspect or missing:", body_bad.len());
+        for (t, b) in &body_bad {
+            eprintln!("  {}/{}: body {}: {}", t.dataset, t.trial, b.status, b.note);
+        }
+    }
+    let body_failed = body_bad.len();
     for d in summary.datasets.iter().filter(|d| d.failed.is_some()) {
         eprintln!("dataset '{}' failed: {}", d.name, d.failed.as_deref().unwrap_or(""));
     }
-    let (ok, bad) = (summary.succeeded(), failed + summary.failed_datasets() + robot_failed);
+    let (ok, bad) = (summary.succeeded(), failed + summary.failed_datasets() + robot_failed + body_failed);
     if ok + bad == 0 {
         eprintln!(
             "{}: no trial found{}",

@@ -23,7 +23,7 @@ mod project;
 mod render;
 mod retarget;
 pub mod robot;
-mod skin_report;
+pub mod skin_report;
 mod solve;
 mod synth;
 

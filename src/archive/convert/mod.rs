@@ -27,7 +27,7 @@ mod summary;
 
 pub use plan::{inside, output_path};
 pub use solve::batches;
-pub use summary::{ConvertSummary, DatasetNote, HookOutcome, SubjectCalibration, TrialOutcome};
+pub use summary::{BodyOutcome, ConvertSummary, DatasetNote, HookOutcome, SubjectCalibration, TrialOutcome};
 
 use crate::archive::config::Dataset;
 use crate::archive::discover::{SubjectGroup, TrialEntry};
@@ -192,6 +192,7 @@ fn outcome(
         unfittable: Vec::new(),
         reason: None,
         robot: None,
+        body: None,
     }
 }
 

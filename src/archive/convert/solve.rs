@@ -170,6 +170,7 @@ fn trial_outcome(
             unfittable: s.unfittable.clone(),
             reason: s.reason.clone(),
             robot: s.robot.clone(),
+            body: None,
             ..outcome(d, g, t, out, if s.suspect.is_some() { "suspect" } else { "ok" }, s.suspect.clone())
         },
         Err(e) => failed(d, g, t, out, e),

@@ -44,6 +44,41 @@ pub struct TrialOutcome {
     /// converted trial; absent without one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub robot: Option<HookOutcome>,
+    /// The body mesh measured on the converted trial (`--body`); absent without it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub body: Option<BodyOutcome>,
+}
+
+/// The body mesh on a converted trial (`convert --body`: the subject's body shaped, posed at
+/// every frame and measured; the whole report in `<trial>.body.json` beside the file).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct BodyOutcome {
+    /// `ok`, `suspect` (a figure past its bound: see `note`), `failed` (no body: see `note`) or
+    /// `skipped` (measured by an earlier run, `--resume`: its report read back).
+    pub status: String,
+    /// One line: how the body was shaped, or which figures are past their bounds, or why none.
+    pub note: String,
+    /// Body height at the bind pose minus the subject's stature (mm).
+    pub height_minus_stature_mm: Option<f64>,
+    /// Landmark markers' |distance to the skin − marker radius| over all frames: median and
+    /// 90th percentile (mm).
+    pub landmark_median_off_skin_mm: Option<f64>,
+    pub landmark_p90_off_skin_mm: Option<f64>,
+    /// Mean distance of the virtual markers (fixed on the skin) from the model's (mm).
+    pub virtual_marker_error_mm: Option<f64>,
+}
+
+impl BodyOutcome {
+    pub fn failed(why: String) -> BodyOutcome {
+        BodyOutcome {
+            status: "failed".into(),
+            note: why,
+            height_minus_stature_mm: None,
+            landmark_median_off_skin_mm: None,
+            landmark_p90_off_skin_mm: None,
+            virtual_marker_error_mm: None,
+        }
+    }
 }
 
 pub use crate::archive::hook::HookOutcome;
@@ -157,7 +192,7 @@ impl ConvertSummary {
                 med(|t| t.rmse_mm),
             );
         }
-        s + &self.unfittable_line() + &self.hook_line() + &self.throughput()
+        s + &self.unfittable_line() + &self.hook_line() + &self.body_line() + &self.throughput()
     }
 
     /// Trials whose post-trial hook (`--robot`) failed (their robot outputs are absent).
@@ -178,6 +213,32 @@ impl ConvertSummary {
             n("suspect"),
             n("failed"),
             n("skipped")
+        )
+    }
+
+    /// The bodies' outcomes counted by status and their figures' medians over the trials, when
+    /// bodies were measured.
+    pub fn body_line(&self) -> String {
+        let all: Vec<&BodyOutcome> = self.trials.iter().filter_map(|t| t.body.as_ref()).collect();
+        if all.is_empty() {
+            return String::new();
+        }
+        let n = |st: &str| all.iter().filter(|b| b.status == st).count();
+        let median = |f: &dyn Fn(&BodyOutcome) -> Option<f64>| {
+            let mut v: Vec<f64> = all.iter().filter_map(|b| f(b)).collect();
+            v.sort_by(f64::total_cmp);
+            v.get(v.len() / 2).map_or("-".into(), |x| format!("{x:.1}"))
+        };
+        format!(
+            "body: {} ok, {} suspect, {} failed, {} skipped; median over the trials: height − stature {} mm, landmarks off the skin {} mm (p90 {} mm), virtual markers {} mm (the trials' `body` in the report, `<trial>.body.json`)\n",
+            n("ok"),
+            n("suspect"),
+            n("failed"),
+            n("skipped"),
+            median(&|b| b.height_minus_stature_mm),
+            median(&|b| b.landmark_median_off_skin_mm),
+            median(&|b| b.landmark_p90_off_skin_mm),
+            median(&|b| b.virtual_marker_error_mm),
         )
     }
 
