@@ -52,7 +52,7 @@ fn measure_body(
     let mut ws = PoseWorkspace::new(model, body);
     body.pose(model, &body.bind_state(model, scales), &mut ws);
     let rest = ws.vertices.clone();
-    let height = smocap::body::pose::height_of(&rest);
+    let height = body.height(&rest);
     let rest_volume = volume(&rest, &body.triangles);
     let e = edges(&body.triangles);
     let joints: Vec<usize> = targets(model, &body.binding.map, &asset).iter().map(|t| t.0).collect();
@@ -386,7 +386,7 @@ fn shaped_bodies_are_the_subjects_stature_with_the_markers_on_the_skin() {
 }
 
 #[test]
-fn convert_with_body_measures_every_trial_and_flags_the_subject_whose_body_misses() {
+fn convert_with_body_measures_every_trial_beside_its_file_and_resumes() {
     let dir = std::env::temp_dir().join(format!("smocap-body-convert-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let run = |extra: &[&str]| {
@@ -405,31 +405,26 @@ fn convert_with_body_measures_every_trial_and_flags_the_subject_whose_body_misse
     };
     let (o, first) = run(&[]);
     let stderr = String::from_utf8_lossy(&o.stderr);
-    // the second synthetic subject's head markers stand 3-4 cm off a head of its stature's
-    // height (`smocap synth` draws every segment's scale on its own): said, exit 3
-    assert_eq!(o.status.code(), Some(3), "{stderr}");
-    assert!(stderr.contains("subj02/walk01.trc: body suspect: past the bounds: height − stature"), "{stderr}");
+    assert_eq!(o.status.code(), Some(0), "{stderr}");
     for t in first["trials"].as_array().unwrap() {
         let b = &t["body"];
         let output = std::path::PathBuf::from(t["output"].as_str().unwrap());
         assert!(output.with_extension("body.json").exists(), "{output:?}");
-        if t["subject"] == "subj01" {
-            assert_eq!(b["status"], "ok", "{b}");
-            assert!(b["height_minus_stature_mm"].as_f64().unwrap().abs() <= 10.0, "{b}");
-            assert!(b["landmark_median_off_skin_mm"].as_f64().unwrap() <= 8.0, "{b}");
-            assert!(b["landmark_p90_off_skin_mm"].as_f64().unwrap() <= 20.0, "{b}");
-            assert!(b["virtual_marker_error_mm"].as_f64().unwrap() <= 10.0, "{b}");
-        } else {
-            assert_eq!(b["status"], "suspect", "{b}");
-        }
+        // the second subject's left leg is 9 cm longer than its right (`smocap synth` draws
+        // each side's scales on their own): its height is read down to the right sole, as its
+        // stature is
+        assert_eq!(b["status"], "ok", "{b}");
+        assert!(b["height_minus_stature_mm"].as_f64().unwrap().abs() <= 10.0, "{b}");
+        assert!(b["landmark_median_off_skin_mm"].as_f64().unwrap() <= 8.0, "{b}");
+        assert!(b["landmark_p90_off_skin_mm"].as_f64().unwrap() <= 20.0, "{b}");
+        assert!(b["virtual_marker_error_mm"].as_f64().unwrap() <= 10.0, "{b}");
     }
     // resumed: the reports are read back, the figures the same
     let (_, again) = run(&["--resume"]);
     for (a, b) in first["trials"].as_array().unwrap().iter().zip(again["trials"].as_array().unwrap()) {
         assert_eq!(a["body"]["height_minus_stature_mm"], b["body"]["height_minus_stature_mm"]);
         assert_eq!(a["body"]["virtual_marker_error_mm"], b["body"]["virtual_marker_error_mm"]);
-        let expected = if a["body"]["status"] == "ok" { "skipped" } else { "suspect" };
-        assert_eq!(b["body"]["status"], expected);
+        assert_eq!(b["body"]["status"], "skipped");
     }
     let _ = std::fs::remove_dir_all(&dir);
 }

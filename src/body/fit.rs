@@ -274,6 +274,8 @@ struct Fit<'a> {
     markers: Vec<(usize, usize, bool)>,
     joints: Vec<usize>,
     stature: Option<f64>,
+    /// The vertices the height is read down to ([`Dressed::height`]).
+    sole: &'a [u32],
     volume_m3: Option<f64>,
     settings: &'a FitSettings,
 }
@@ -328,7 +330,7 @@ impl Fit<'_> {
         if si == 0 {
             // weighed as if in every state, as the markers are
             let per_state = (self.states.len() as f64).sqrt();
-            let (lo, hi) = extremes(posed);
+            let (lo, hi) = extremes(posed, self.sole);
             e.stature_error = self.stature.map(|h| posed[hi][2] as f64 - posed[lo][2] as f64 - h);
             if let Some(err) = e.stature_error {
                 // the top of the head moves; the soles stay where the feet's markers put them
@@ -446,6 +448,7 @@ pub fn fit_to_markers(
     settings: &FitSettings,
 ) -> ShapeFit {
     let kinds = super::skin_distance::marker_kinds(model);
+    let sole = body.sole.clone();
     let mut ws = PoseWorkspace::new(model, body);
     let mut states = vec![state(model, body, &body.bind_state(model, scales), &mut ws)];
     for q in poses {
@@ -464,6 +467,7 @@ pub fn fit_to_markers(
             .collect(),
         joints: super::bind::targets(model, &body.binding.map, asset).iter().map(|t| t.0).collect(),
         stature,
+        sole: &sole,
         volume_m3,
         settings,
     };
@@ -553,15 +557,20 @@ fn volume_gradient(v: &[[f32; 3]], triangles: &[[u32; 3]]) -> (f64, Row) {
     (total, grad.into_iter().enumerate().collect())
 }
 
-/// The lowest and highest vertex along Z.
-fn extremes(v: &[[f32; 3]]) -> (usize, usize) {
-    let (mut lo, mut hi) = (0, 0);
+/// The lowest vertex of `sole` (of all where empty) and the highest vertex, along Z.
+fn extremes(v: &[[f32; 3]], sole: &[u32]) -> (usize, usize) {
+    let (mut lo, mut hi) = (sole.first().map_or(0, |&k| k as usize), 0);
     for (i, x) in v.iter().enumerate() {
-        if x[2] < v[lo][2] {
+        if sole.is_empty() && x[2] < v[lo][2] {
             lo = i;
         }
         if x[2] > v[hi][2] {
             hi = i;
+        }
+    }
+    for &k in sole {
+        if v[k as usize][2] < v[lo][2] {
+            lo = k as usize;
         }
     }
     (lo, hi)

@@ -33,6 +33,9 @@ pub struct Dressed {
     pub target_stature: f64,
     /// Counter-clockwise seen from outside.
     pub triangles: Vec<[u32; 3]>,
+    /// The right foot's skin (vertices mostly on `calcn_r` or `toes_r`), whose lowest vertex
+    /// the body's height is read down to ([`Dressed::height`]).
+    pub sole: Vec<u32>,
     /// The shaping to the subject's markers, where it was done ([`super::fit`]).
     pub fit: Option<ShapeFit>,
 }
@@ -83,6 +86,14 @@ pub fn phenotype_for(sex: Option<Sex>) -> Phenotype {
         None => 0.5,
     };
     Phenotype { gender, ..Phenotype::default() }
+}
+
+/// The vertices whose largest skinning weight is on the asset's right foot (`calcn_r`, `toes_r`).
+fn right_foot(asset: &BodyAsset) -> Vec<u32> {
+    let foot: Vec<u8> = ["calcn_r", "toes_r"].iter().filter_map(|s| asset.segment_index(s)).map(|i| i as u8).collect();
+    let top =
+        |k: &super::asset::Skin| (0..4).max_by(|&a, &b| k.weights[a].total_cmp(&k.weights[b])).map(|i| k.segments[i]);
+    (0..asset.skin.len() as u32).filter(|&v| top(&asset.skin[v as usize]).is_some_and(|s| foot.contains(&s))).collect()
 }
 
 /// Highest minus lowest point along Z.
@@ -162,6 +173,7 @@ impl Dressed {
             shape_stature: shape.stature(),
             target_stature: target,
             triangles: asset.triangles.clone(),
+            sole: right_foot(asset),
             fit: None,
         }
     }
@@ -173,11 +185,26 @@ impl Dressed {
         y
     }
 
-    /// Height (m) of the body at the bind pose and `scales`.
+    /// Height (m) of the body at the bind pose and `scales` ([`Dressed::height`]).
     pub fn bind_pose_height(&self, model: &Model, scales: &[f64]) -> f64 {
         let mut ws = PoseWorkspace::new(model, self);
         self.pose(model, &self.bind_state(model, scales), &mut ws);
-        height_of(&ws.vertices)
+        self.height(&ws.vertices)
+    }
+
+    /// Height (m) of posed `vertices` as a stature is read: the highest vertex above the right
+    /// foot's sole, as the stature dimensions of `models/landmarks/` read it (down to the right
+    /// heel). Both soles are level on most subjects; where the legs differ (`smocap synth` draws
+    /// each side's scales on their own: its second subject's left leg is 9 cm longer) the
+    /// highest-minus-lowest vertex would read the longer leg, and the shaping would shrink the
+    /// whole shape to make up for it.
+    pub fn height(&self, vertices: &[[f32; 3]]) -> f64 {
+        let hi = vertices.iter().fold(f32::NEG_INFINITY, |hi, v| hi.max(v[2]));
+        let lo = match self.sole.is_empty() {
+            true => vertices.iter().fold(f32::INFINITY, |lo, v| lo.min(v[2])),
+            false => self.sole.iter().fold(f32::INFINITY, |lo, &k| lo.min(vertices[k as usize][2])),
+        };
+        (hi - lo) as f64
     }
 
     /// Poses the body at state `y = [q; s]`: forward kinematics, then [`Dressed::skin`] into

@@ -248,3 +248,38 @@ fn outcome(report: &serde_json::Value, status: &str) -> BodyOutcome {
         virtual_marker_error_mm: virtual_mm,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn report(height_mm: f64, p90_mm: f64, edges: f64, volume_min: f64) -> serde_json::Value {
+        serde_json::json!({
+            "body": { "summary": "body: shaped", "height_minus_stature_mm": height_mm },
+            "landmarks": { "median_off_skin_mm": 1.0, "p90_off_skin_mm": p90_mm },
+            "virtual_marker_error_mm": 3.0,
+            "mesh_in_motion": {
+                "edges_within_half_to_twice_rest": edges,
+                "volume_over_rest_min": volume_min,
+                "volume_over_rest_max": 1.0,
+            },
+        })
+    }
+
+    #[test]
+    fn a_body_within_every_bound_keeps_its_status_and_summary() {
+        let o = outcome(&report(2.0, 6.0, 0.9995, 0.97), "ok");
+        assert_eq!((o.status.as_str(), o.note.as_str()), ("ok", "body: shaped"));
+        assert_eq!(o.height_minus_stature_mm, Some(2.0));
+    }
+
+    #[test]
+    fn a_body_past_a_bound_is_suspect_and_says_which() {
+        let o = outcome(&report(-12.0, 25.0, 0.998, 0.90), "skipped");
+        assert_eq!(o.status, "suspect");
+        for what in ["height − stature -12 mm", "p90", "edge-frames within 0.5–2× rest 99.80 %", "volume 0.9–1"]
+        {
+            assert!(o.note.contains(what), "{what}: {}", o.note);
+        }
+    }
+}
