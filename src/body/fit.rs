@@ -559,21 +559,8 @@ fn volume_gradient(v: &[[f32; 3]], triangles: &[[u32; 3]]) -> (f64, Row) {
 
 /// The lowest vertex of `sole` (of all where empty) and the highest vertex, along Z.
 fn extremes(v: &[[f32; 3]], sole: &[u32]) -> (usize, usize) {
-    let (mut lo, mut hi) = (sole.first().map_or(0, |&k| k as usize), 0);
-    for (i, x) in v.iter().enumerate() {
-        if sole.is_empty() && x[2] < v[lo][2] {
-            lo = i;
-        }
-        if x[2] > v[hi][2] {
-            hi = i;
-        }
-    }
-    for &k in sole {
-        if v[k as usize][2] < v[lo][2] {
-            lo = k as usize;
-        }
-    }
-    (lo, hi)
+    let hi = (0..v.len()).fold(0, |hi, i| if v[i][2] > v[hi][2] { i } else { hi });
+    (super::pose::lowest(v, sole), hi)
 }
 
 /// Stores `Δv` (asset frame, bind pose) into every influence: `u += diag(1/s_bind) Rᵀ R0ᵀ Δv`.

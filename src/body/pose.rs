@@ -96,6 +96,16 @@ fn right_foot(asset: &BodyAsset) -> Vec<u32> {
     (0..asset.skin.len() as u32).filter(|&v| top(&asset.skin[v as usize]).is_some_and(|s| foot.contains(&s))).collect()
 }
 
+/// The lowest vertex along Z among `among` (among all where it is empty).
+pub(super) fn lowest(vertices: &[[f32; 3]], among: &[u32]) -> usize {
+    let z = |k: &usize| vertices[*k][2];
+    match among.is_empty() {
+        true => (0..vertices.len()).min_by(|a, b| z(a).total_cmp(&z(b))),
+        false => among.iter().map(|&k| k as usize).min_by(|a, b| z(a).total_cmp(&z(b))),
+    }
+    .unwrap_or(0)
+}
+
 /// Highest minus lowest point along Z.
 pub fn height_of(vertices: &[[f32; 3]]) -> f64 {
     let (lo, hi) = vertices.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| (lo.min(v[2]), hi.max(v[2])));
@@ -200,11 +210,7 @@ impl Dressed {
     /// whole shape to make up for it.
     pub fn height(&self, vertices: &[[f32; 3]]) -> f64 {
         let hi = vertices.iter().fold(f32::NEG_INFINITY, |hi, v| hi.max(v[2]));
-        let lo = match self.sole.is_empty() {
-            true => vertices.iter().fold(f32::INFINITY, |lo, v| lo.min(v[2])),
-            false => self.sole.iter().fold(f32::INFINITY, |lo, &k| lo.min(vertices[k as usize][2])),
-        };
-        (hi - lo) as f64
+        (hi - vertices[lowest(vertices, &self.sole)][2]) as f64
     }
 
     /// Poses the body at state `y = [q; s]`: forward kinematics, then [`Dressed::skin`] into
