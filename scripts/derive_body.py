@@ -16,8 +16,9 @@ and writes models/body/{body.bin, body.json, LICENSE.md}. README.md there is wri
 What it derives (see models/body/README.md for the measured numbers):
   - the closed `body` mesh (vertices 0..13379), quads split into triangles (a,b,c)+(a,c,d),
     in metres in smocap's world frame (Z up, X forward, Y to the figure's left);
-  - skinning weights of the default rig folded onto smocap body segments (<= 4 per vertex, u16
-    summing to 65535 exactly);
+  - skinning weights of the default rig folded onto smocap body segments, averaged over the
+    skin around the hips, waist and shoulders (`smooth_trunk_weights`), then <= 4 per vertex,
+    u16 summing to 65535 exactly;
   - the centres of the 125 `joint-*` cubes (the rig's joint locators), which follow the shape;
   - a PCA basis of adult shapes (body vertices + cube centres) and the exact map from the
     phenotype parameters to its coefficients (the projection of every macro target onto it).
@@ -245,6 +246,64 @@ def mesh_checks(tris, pos):
     }
 
 
+# Weight smoothing across the hips, shoulders and waist (see `smooth_trunk_weights`).
+TRUNK = ["pelvis", "torso", "head", "femur_r", "femur_l", "humerus_r", "humerus_l"]
+SMOOTH_SIGMA_M = 0.065
+
+
+def smooth_trunk_weights(W, pos, tris):
+    """Averages the weights of the vertices carried by the trunk segments alone (pelvis, torso,
+    thighs, upper arms: >= 0.999 of a vertex's weight) over the skin around each of them: a
+    Gaussian of the geodesic distance (SMOOTH_SIGMA_M, cut at 3 sigma; shortest paths along
+    edges between such vertices), each vertex counting by its area. Knees, elbows and the neck
+    keep the rig's weights. Why: behind a hip flexed 90 degrees the skin has to cover an arc
+    about r*theta ~ 17 cm longer; the rig's blend zones, a few centimetres wide, stretch it 2 to
+    40 times (the drop jumps); a zone of ~2.5 sigma keeps it under twice. (Heat diffusion,
+    whose kernel has long tails, spread the upper arms' weights over the chest instead.)
+    Pure Python Dijkstra, deterministic. Returns (W', vertices smoothed)."""
+    import heapq
+
+    cols = [SEGMENTS.index(s) for s in TRUNK]
+    inside = W[:, cols].sum(axis=1) >= 0.999
+    n = len(W)
+    area = np.zeros(n)
+    a, b, c = pos[tris[:, 0]], pos[tris[:, 1]], pos[tris[:, 2]]
+    tri_area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    for k in range(3):
+        np.add.at(area, tris[:, k], tri_area / 3.0)
+    e = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+    e = np.unique(e, axis=0)
+    e = e[inside[e[:, 0]] & inside[e[:, 1]]]
+    length = np.linalg.norm(pos[e[:, 0]] - pos[e[:, 1]], axis=1)
+    adj = [[] for _ in range(n)]
+    for (i, j), d in zip(e.tolist(), length.tolist()):
+        adj[i].append((j, d))
+        adj[j].append((i, d))
+    reach = 3.0 * SMOOTH_SIGMA_M
+    inv2s2 = 1.0 / (2.0 * SMOOTH_SIGMA_M ** 2)
+    out = W.copy()
+    idx = np.flatnonzero(inside)
+    for s in idx.tolist():
+        dist = {s: 0.0}
+        done = []
+        heap = [(0.0, s)]
+        while heap:
+            d, v = heapq.heappop(heap)
+            if d > dist[v]:
+                continue
+            done.append((v, d))
+            for u, l in adj[v]:
+                nd = d + l
+                if nd < reach and nd < dist.get(u, reach):
+                    dist[u] = nd
+                    heapq.heappush(heap, (nd, u))
+        vs = np.array([v for v, _ in done])
+        ds = np.array([d for _, d in done])
+        k = np.exp(-ds * ds * inv2s2) * area[vs]
+        out[s] = k @ W[vs] / k.sum()
+    return out, int(len(idx))
+
+
 def quantise_weights(w):
     """(n, S) weights -> 4 (segment, u16 weight) per vertex summing to 65535 exactly (largest
     remainders round up, ties to the earlier slot); slots left empty hold segment 0, weight 0."""
@@ -316,6 +375,7 @@ def main():
     if np.abs(wsum - 1).max() > 1e-3:
         raise SystemExit("derive_body: body weights do not sum to 1 (%g)" % np.abs(wsum - 1).max())
     W /= wsum[:, None]
+    W, smoothed = smooth_trunk_weights(W, base[:N_BODY], tris)
     seg_idx, seg_w, dropped = quantise_weights(W)
     infl = (W > 0).sum(axis=1)
     recon = np.zeros_like(W)
@@ -457,6 +517,7 @@ def main():
             "stored_f16": {k: r6(v) for k, v in err_final.items()},
             "f32_by_rank": {str(r): {k: r6(v) for k, v in e.items()} for r, e in rank_table.items()},
             "weights_u16_max_abs": r6(wq_err),
+            "weights_smoothed": {"segments": TRUNK, "sigma_m": SMOOTH_SIGMA_M, "vertices": smoothed},
             "weights_dropped_max": r6(dropped),
         },
         "mesh": {k: (r6(v) if isinstance(v, float) else v) for k, v in chk.items()},
@@ -478,6 +539,8 @@ def main():
     p("weights: rig bones per vertex max %d; segments per vertex: %s; dropped beyond 4: max %.3g; "
       "u16 quantisation max abs error %.2g" % (bones_per_vertex.max(),
       {int(k): int(v) for k, v in zip(*np.unique(infl, return_counts=True))}, dropped, wq_err))
+    p("weights smoothed over %d vertices carried by %s (geodesic Gaussian, sigma %.3f m)" % (
+      smoothed, "/".join(TRUNK), SMOOTH_SIGMA_M))
     p("targets: %d adult targets (%d vertices + %d joints = %d dims)" % (K, N_BODY, nj, D))
     p("PCA variance explained by rank: %s" % ", ".join(
         "%d: %.6f" % (r, var[:r].sum() / var.sum()) for r in (5, 10, 15, 20, 30)))

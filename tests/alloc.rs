@@ -283,3 +283,38 @@ fn retargeting_frames_onto_the_g1_allocates_nothing_once_warm() {
     let allocated = ALLOCATIONS.load(Ordering::Relaxed) - before;
     assert_eq!(allocated, 0, "59 retargeted frames allocated {allocated} times");
 }
+
+#[test]
+fn posing_the_body_mesh_allocates_nothing_once_warm() {
+    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let ctx = Context::shipped().unwrap();
+    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 20, seed: 3, ..SynthOptions::default() });
+    let asset = smocap::body::BodyAsset::shipped().unwrap();
+    let scales: Vec<f64> =
+        ctx.model.bodies.iter().flat_map(|b| s.truth.body_scales.get(&b.name).copied().unwrap_or([1.0; 3])).collect();
+    let sub = smocap::body::SubjectBody { stature_m: None, info: Default::default() };
+    let wfm = nalgebra::UnitQuaternion::identity();
+    let (body, _) = smocap::body::dress_subject(&ctx.model, &wfm, &asset, &scales, &sub).unwrap();
+    assert!(!body.binding.helpers.helpers.is_empty(), "the shipped model's body has helper joints");
+    let mut ws = smocap::body::PoseWorkspace::new(&ctx.model, &body);
+    let states: Vec<Vec<f64>> = (0..s.truth.coordinates.len())
+        .map(|f| {
+            let mut y = ctx.model.default_state();
+            for (name, v) in s.truth.coordinate_names.iter().zip(&s.truth.coordinates[f]) {
+                if let Some(j) = ctx.model.coordinates.iter().position(|c| &c.name == name) {
+                    y[j] = *v;
+                }
+            }
+            y[ctx.model.nq()..].copy_from_slice(&scales);
+            y
+        })
+        .collect();
+    body.pose(&ctx.model, &states[0], &mut ws);
+    let _counted = Counted::on();
+    let n = allocations_of(|| {
+        for y in &states {
+            body.pose(&ctx.model, y, &mut ws);
+        }
+    });
+    assert_eq!(n, 0, "{n} allocations posing {} frames", states.len());
+}

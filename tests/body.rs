@@ -428,3 +428,75 @@ fn convert_with_body_measures_every_trial_beside_its_file_and_resumes() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Helper joints ([`smocap::body::helpers`]): with the right hip flexed 90°, the skin blended
+/// about half and half between the pelvis and the thigh (≥ 80 % of its weight on the two, the
+/// thigh's share 35–65 %) stays near its distance from the hip centre (measured 0.95 of it),
+/// where linear blending of the bodies alone pulls it toward the chord (0.81; cos 45° ≈ 0.71 for
+/// an even split of the two alone); at the bind pose the helpers change nothing.
+#[test]
+fn helper_joints_keep_a_flexed_hip_round_where_linear_blending_collapses_it() {
+    let model = smocap::pipeline::Context::shipped().unwrap().model;
+    let asset = BodyAsset::shipped().unwrap();
+    let ones = vec![1.0; 3 * model.nb()];
+    let body = Dressed::new(&model, &UnitQuaternion::identity(), &asset, &ones, None, Phenotype::default()).unwrap();
+    let (pelvis, femur) = (model.body_index("pelvis").unwrap(), model.body_index("femur_r").unwrap());
+    let mut ws = PoseWorkspace::new(&model, &body);
+    let bind = body.binding.y.clone();
+    body.pose(&model, &bind, &mut ws);
+    let rest = ws.vertices.clone();
+    // at the bind pose every joint (helpers too) is where its body is: plain blending
+    let plain = |y: &[f64], ws: &mut PoseWorkspace| -> Vec<[f64; 3]> {
+        smocap::kinematics::cpu::forward(&model, y, &mut ws.kin);
+        body.binding
+            .influences
+            .iter()
+            .map(|inf| {
+                let mut v = nalgebra::Vector3::zeros();
+                for x in inf.iter().filter(|x| x.weight > 0.0) {
+                    let b = x.body as usize;
+                    let i = model.scale_index(b, 0);
+                    let u = nalgebra::Vector3::new(
+                        x.local[0] as f64 * y[i],
+                        x.local[1] as f64 * y[i + 1],
+                        x.local[2] as f64 * y[i + 2],
+                    );
+                    v += (ws.kin.body_rot[b] * u + ws.kin.body_pos[b]) * x.weight as f64;
+                }
+                [v.x, v.y, v.z]
+            })
+            .collect()
+    };
+    let at_bind = plain(&bind, &mut ws);
+    let worst = rest
+        .iter()
+        .zip(&at_bind)
+        .map(|(a, b)| (0..3).map(|k| (a[k] as f64 - b[k]).abs()).fold(0.0, f64::max))
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-5, "at the bind pose the helpers moved a vertex by {worst} m");
+    let mut flexed = bind.clone();
+    flexed[model.coordinate_index("hip_flexion_r").unwrap()] += 90f64.to_radians();
+    body.pose(&model, &flexed, &mut ws);
+    let posed = ws.vertices.clone();
+    let lbs = plain(&flexed, &mut ws);
+    smocap::kinematics::cpu::forward(&model, &bind, &mut ws.kin);
+    let hip0 = ws.kin.body_pos[femur];
+    smocap::kinematics::cpu::forward(&model, &flexed, &mut ws.kin);
+    let hip1 = ws.kin.body_pos[femur];
+    let (mut with, mut without, mut n) = (0.0, 0.0, 0usize);
+    for (v, inf) in body.binding.influences.iter().enumerate() {
+        let w = |b: usize| inf.iter().filter(|x| x.body as usize == b).map(|x| x.weight as f64).sum::<f64>();
+        let (wp, wf) = (w(pelvis), w(femur));
+        if wp + wf < 0.8 || !(0.35..=0.65).contains(&(wf / (wp + wf))) {
+            continue;
+        }
+        let r0 = (nalgebra::Vector3::from(rest[v].map(|x| x as f64)) - hip0).norm();
+        with += (nalgebra::Vector3::from(posed[v].map(|x| x as f64)) - hip1).norm() / r0;
+        without += (nalgebra::Vector3::from(lbs[v]) - hip1).norm() / r0;
+        n += 1;
+    }
+    let (with, without) = (with / n as f64, without / n as f64);
+    eprintln!("{n} vertices half pelvis, half thigh: distance to the hip over rest {with:.3} with helpers, {without:.3} blending the two bodies");
+    assert!(n > 20, "{n}");
+    assert!(with > 0.93 && without < 0.85, "with helpers {with:.3}, without {without:.3}");
+}

@@ -34,15 +34,7 @@ use crate::kinematics::cpu::{forward, Workspace};
 use crate::model::{CoordinateKind, Model, MotionKind};
 use nalgebra::{DMatrix, DVector, Matrix3, UnitQuaternion, Vector3};
 
-/// One skinning influence of a vertex: the model body, its weight, and the vertex in the body's
-/// frame at unit scale (m; the bind position divided by the bind scales, axis by axis), so that
-/// a pose at scales `s` puts it at `R_b (s_b ⊙ local) + p_b`.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Influence {
-    pub body: u16,
-    pub weight: f32,
-    pub local: [f32; 3],
-}
+pub use super::influence::Influence;
 
 /// The spine levels: `(which body, cube, weight)`; `Lowest` is the first body above the pelvis
 /// on the torso's chain (the torso itself in a model without lumbar bodies).
@@ -139,6 +131,9 @@ pub struct Binding {
     pub influences: Vec<[Influence; 4]>,
     /// The rotation from the model's frame to the asset's (Z-up) frame.
     pub world_from_model: UnitQuaternion<f64>,
+    /// Helper joints between bodies and their descendants, and every vertex's influences over
+    /// bodies and helpers, which skinning uses ([`super::helpers`]).
+    pub helpers: super::helpers::Helpers,
 }
 
 impl Binding {
@@ -278,6 +273,7 @@ pub fn bind_from(
     forward(model, &y, &mut ws);
     let errors = pairs.iter().map(|(b, t, _)| (model.bodies[*b].name.clone(), (ws.body_pos[*b] - t).norm())).collect();
     let influences = influences(model, asset, shape, &map, &y, &ws, &model_from_world);
+    let helpers = super::helpers::split(model, &influences, &ws.body_rot, &ws.body_pos, &y);
     Ok(Binding {
         map,
         y,
@@ -287,6 +283,7 @@ pub fn bind_from(
         iterations,
         influences,
         world_from_model: *world_from_model,
+        helpers,
     })
 }
 

@@ -27,6 +27,8 @@
 pub mod asset;
 pub mod bind;
 pub mod fit;
+pub mod helpers;
+pub mod influence;
 pub mod keypoints;
 pub mod metrics;
 pub mod obj;

@@ -63,17 +63,32 @@ pub struct ShapeFit {
 pub struct PoseWorkspace {
     pub kin: Workspace,
     pub vertices: Vec<[f32; 3]>,
+    /// Per joint (bodies, then helpers): its map from unit-scale coordinates to the output frame.
     rot: Vec<Matrix3<f64>>,
     pos: Vec<Vector3<f64>>,
+    /// Per joint: its rotation in the output frame (no scale); per body, at the bind state.
+    turn: Vec<Matrix3<f64>>,
+    bind_turn: Vec<Matrix3<f64>>,
 }
 
 impl PoseWorkspace {
+    /// Joint `j`'s (body `j < nb`, else helper `j − nb`) rotation and origin in the output
+    /// frame after [`Dressed::pose_joints`] (a helper's origin is where it carries its parent's).
+    pub fn joint(&self, j: usize) -> (Matrix3<f64>, Vector3<f64>) {
+        (self.turn[j], self.pos[j])
+    }
+
     pub fn new(model: &Model, body: &Dressed) -> PoseWorkspace {
         PoseWorkspace {
             kin: Workspace::new(model),
             vertices: vec![[0.0; 3]; body.binding.influences.len()],
-            rot: vec![Matrix3::identity(); model.nb()],
-            pos: vec![Vector3::zeros(); model.nb()],
+            rot: vec![Matrix3::identity(); model.nb() + body.binding.helpers.helpers.len()],
+            pos: vec![Vector3::zeros(); model.nb() + body.binding.helpers.helpers.len()],
+            turn: vec![Matrix3::identity(); model.nb() + body.binding.helpers.helpers.len()],
+            bind_turn: {
+                let r0 = body.binding.world_from_model.to_rotation_matrix().into_inner();
+                body.binding.body_rot.iter().map(|r| r0 * r).collect()
+            },
         }
     }
 }
@@ -213,33 +228,44 @@ impl Dressed {
         (hi - vertices[lowest(vertices, &self.sole)][2]) as f64
     }
 
-    /// Poses the body at state `y = [q; s]`: forward kinematics, then [`Dressed::skin`] into
-    /// `ws.vertices`. Allocates nothing.
+    /// Poses the body at state `y = [q; s]`: [`Dressed::pose_joints`], then [`Dressed::skin`]
+    /// into `ws.vertices`. Allocates nothing.
     pub fn pose(&self, model: &Model, y: &[f64], ws: &mut PoseWorkspace) {
+        self.pose_joints(model, y, ws);
+        self.skin(&ws.rot, &ws.pos, &mut ws.vertices);
+    }
+
+    /// Forward kinematics and every joint's map (bodies, then helpers) at state `y`, read with
+    /// [`PoseWorkspace::joint`]. Allocates nothing.
+    pub fn pose_joints(&self, model: &Model, y: &[f64], ws: &mut PoseWorkspace) {
         forward(model, y, &mut ws.kin);
-        let PoseWorkspace { kin, vertices, rot, pos } = ws;
+        let PoseWorkspace { kin, rot, pos, turn, bind_turn, .. } = ws;
         let r0 = self.binding.world_from_model.to_rotation_matrix().into_inner();
         for b in 0..model.nb() {
             let i = model.scale_index(b, 0);
             // world from unit-scale body coordinates: R0 R_b diag(s_b)
-            rot[b] = r0 * kin.body_rot[b] * Matrix3::from_diagonal(&Vector3::new(y[i], y[i + 1], y[i + 2]));
+            turn[b] = r0 * kin.body_rot[b];
+            rot[b] = turn[b] * Matrix3::from_diagonal(&Vector3::new(y[i], y[i + 1], y[i + 2]));
             pos[b] = r0 * kin.body_pos[b];
         }
-        self.skin(rot, pos, vertices);
+        super::helpers::frames(&self.binding.helpers.helpers, bind_turn, rot, pos, turn);
     }
 
-    /// Linear-blend skinning with `rot[b]`, `pos[b]`: each body's map from its unit-scale
-    /// coordinates to the output frame (`R diag(s)`, origin), into `out` (one per vertex).
+    /// Linear-blend skinning with `rot[j]`, `pos[j]`: each joint's (bodies, then helpers) map
+    /// from unit-scale coordinates to the output frame (`R diag(s)`, origin), into `out` (one
+    /// per vertex).
     pub fn skin(&self, rot: &[Matrix3<f64>], pos: &[Vector3<f64>], out: &mut [[f32; 3]]) {
-        for (o, inf) in out.iter_mut().zip(&self.binding.influences) {
+        let b = &self.binding;
+        for ((o, joints), inf) in out.iter_mut().zip(&b.helpers.joints).zip(&b.influences) {
             let mut v = Vector3::zeros();
-            for x in inf {
+            for x in joints {
                 if x.weight == 0.0 {
                     break;
                 }
-                let b = x.body as usize;
-                let u = Vector3::new(x.local[0] as f64, x.local[1] as f64, x.local[2] as f64);
-                v += (rot[b] * u + pos[b]) * x.weight as f64;
+                let j = x.joint as usize;
+                let l = inf[x.from as usize].local;
+                let u = Vector3::new(l[0] as f64, l[1] as f64, l[2] as f64);
+                v += (rot[j] * u + pos[j]) * x.weight as f64;
             }
             *o = [v.x as f32, v.y as f32, v.z as f32];
         }

@@ -193,18 +193,36 @@ pub fn document_with_body(
             zfar: 1000.0,
         });
     }
-    if let Some(dressed) = dressed {
-        skinned_body(&mut doc, take, up, dressed);
+    let helpers = dressed.map(|d| skinned_body(&mut doc, take, up, d));
+    let mut anim = animation(take, first_obs, &mut ws);
+    if let (Some(body), Some(first)) = (dressed, helpers) {
+        anim.tracks.extend(helper_tracks(take, body, first));
     }
-    doc.animation = Some(animation(take, first_obs, &mut ws));
+    doc.animation = Some(anim);
     Ok(doc)
 }
 
-/// Adds the root node `body`, its mesh and its skin over the body nodes (`2 + b`).
-fn skinned_body(doc: &mut Document, take: &Take, up: Up, body: &Dressed) {
+/// Adds the root node `body`, its mesh and its skin over the body nodes (`2 + b`) and the
+/// helper joints ([`crate::body::helpers`]: nodes under `model`, animated by
+/// [`helper_tracks`]); returns the first helper node's index.
+fn skinned_body(doc: &mut Document, take: &Take, up: Up, body: &Dressed) -> usize {
     let model = &take.model;
     let mut ws = PoseWorkspace::new(model, body);
     body.pose(model, &body.bind_state(model, &take.scales), &mut ws);
+    let first_helper = doc.nodes.len();
+    let r0t = body.binding.world_from_model.inverse().to_rotation_matrix().into_inner();
+    let nb = model.nb();
+    let mut bind_frames = Vec::new();
+    for (k, h) in body.binding.helpers.helpers.iter().enumerate() {
+        let name = format!("helper:{}-{}:{}", model.bodies[h.parent].name, model.bodies[h.child].name, h.fraction);
+        let mut n = Node::new(name, Some(1));
+        let (r, t) = ws.joint(nb + k);
+        let (r, t) = (r0t * r, r0t * t);
+        n.translation = t.into();
+        n.rotation = xyzw(&quat(&r));
+        doc.nodes.push(n);
+        bind_frames.push((r, t));
+    }
     let s = up.scene_from_world().to_rotation_matrix().into_inner();
     let sw = s * take.world_from_model.to_rotation_matrix().into_inner();
     let positions: Vec<[f32; 3]> = ws
@@ -233,14 +251,16 @@ fn skinned_body(doc: &mut Document, take: &Take, up: Up, body: &Dressed) {
         ..Default::default()
     };
     doc.materials.push(Material { name: "skin".into(), rgba: [0.8, 0.62, 0.5, 1.0] });
-    for inf in &body.binding.influences {
-        prim.joints.push(inf.map(|x| if x.weight > 0.0 { x.body } else { 0 }));
+    for inf in &body.binding.helpers.joints {
+        prim.joints.push(inf.map(|x| if x.weight > 0.0 { x.joint } else { 0 }));
         prim.weights.push(inf.map(|x| x.weight));
     }
-    let inverse_bind = (0..model.nb())
-        .map(|b| {
-            let r = sw * ws.kin.body_rot[b];
-            let t = sw * ws.kin.body_pos[b];
+    let frame = |j: usize| if j < nb { (ws.kin.body_rot[j], ws.kin.body_pos[j]) } else { bind_frames[j - nb] };
+    let joints = nb + bind_frames.len();
+    let inverse_bind = (0..joints)
+        .map(|j| {
+            let (r, t) = frame(j);
+            let (r, t) = (sw * r, sw * t);
             let inv = nalgebra::Matrix4::new_translation(&t) * r.to_homogeneous();
             let inv = inv.try_inverse().unwrap_or_else(nalgebra::Matrix4::identity);
             let mut m = [0f32; 16];
@@ -250,12 +270,48 @@ fn skinned_body(doc: &mut Document, take: &Take, up: Up, body: &Dressed) {
             m
         })
         .collect();
-    doc.skins.push(gltf::Skin { name: "body".into(), joints: (0..model.nb()).map(|b| 2 + b).collect(), inverse_bind });
+    let skin_joints = (0..joints).map(|j| if j < nb { 2 + j } else { first_helper + j - nb }).collect();
+    doc.skins.push(gltf::Skin { name: "body".into(), joints: skin_joints, inverse_bind });
     let mut n = Node::new("body", None);
     n.mesh = Some(doc.meshes.len());
     n.skin = Some(0);
     doc.meshes.push(Mesh { name: "body".into(), primitives: vec![prim] });
     doc.nodes.push(n);
+    first_helper
+}
+
+/// The helper joints' poses per frame (nodes `first..`, in the model's frame).
+fn helper_tracks(take: &Take, body: &Dressed, first: usize) -> Vec<Track> {
+    let (model, nb, n) = (&take.model, take.model.nb(), take.len());
+    let nh = body.binding.helpers.helpers.len();
+    let r0t = body.binding.world_from_model.inverse().to_rotation_matrix().into_inner();
+    let mut ws = PoseWorkspace::new(model, body);
+    let mut trans = vec![Vec::with_capacity(n); nh];
+    let mut rots: Vec<Vec<[f32; 4]>> = vec![Vec::with_capacity(n); nh];
+    let mut y = vec![0.0; model.ny()];
+    for i in 0..n {
+        y[..model.nq()].copy_from_slice(&take.q[i]);
+        y[model.nq()..].copy_from_slice(&take.scales);
+        body.pose_joints(model, &y, &mut ws);
+        for k in 0..nh {
+            let (r, t) = ws.joint(nb + k);
+            let t = r0t * t;
+            trans[k].push([t.x as f32, t.y as f32, t.z as f32]);
+            let mut q = gltf::unit_f32(xyzw(&quat(&(r0t * r))));
+            if let Some(prev) = rots[k].last() {
+                if prev.iter().zip(&q).map(|(a, b)| a * b).sum::<f32>() < 0.0 {
+                    q = q.map(|v| -v);
+                }
+            }
+            rots[k].push(q);
+        }
+    }
+    let mut tracks = Vec::with_capacity(2 * nh);
+    for (k, (t, r)) in trans.into_iter().zip(rots).enumerate() {
+        tracks.push(Track { node: first + k, values: Values::Translation(t), step: false });
+        tracks.push(Track { node: first + k, values: Values::Rotation(r), step: false });
+    }
+    tracks
 }
 
 /// The `motion` animation: every body's local pose per frame, the observed markers.
