@@ -475,3 +475,45 @@ fn a_scale_setup_naming_a_missing_static_trial_asks_for_static() {
     assert_clean_failure(&o, "--static");
     assert!(stderr(&o).contains("static_walk_1.trc"), "{}", stderr(&o));
 }
+
+/// `synth --motion fast-arm` swings the right shoulder at ≥ 1,500°/s (issue 32's scenario); on a
+/// model without that shoulder it fails saying so.
+#[test]
+fn synth_fast_arm_swings_the_right_shoulder_and_refuses_a_model_without_one() {
+    let dir = tmp("fast-arm");
+    std::fs::create_dir_all(&dir).unwrap();
+    let (trc, truth) = (dir.join("a.trc"), dir.join("a.json"));
+    let o = smocap(&[
+        "synth",
+        "--motion",
+        "fast-arm",
+        "--frames",
+        "60",
+        "--out",
+        trc.to_str().unwrap(),
+        "--truth",
+        truth.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let t: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&truth).unwrap()).unwrap();
+    let names: Vec<&str> = t["coordinate_names"].as_array().unwrap().iter().map(|v| v.as_str().unwrap()).collect();
+    let k = names.iter().position(|n| *n == "arm_flex_r").expect("arm_flex_r in the truth");
+    let q: Vec<f64> = t["coordinates"].as_array().unwrap().iter().map(|f| f[k].as_f64().unwrap()).collect();
+    let peak = q.windows(2).map(|w| (w[1] - w[0]).abs()).fold(0.0, f64::max).to_degrees() * 100.0;
+    assert!(peak >= 1500.0, "peak {peak}°/s");
+    let o = smocap(&[
+        "synth",
+        "--model",
+        "models/dog.xml",
+        "--profile",
+        "models/dog.toml",
+        "--motion",
+        "fast-arm",
+        "--out",
+        trc.to_str().unwrap(),
+        "--truth",
+        truth.to_str().unwrap(),
+    ]);
+    assert_clean_failure(&o, "no right shoulder flexion proxy");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,9 +1,12 @@
-//! Unfittable frames explained (issue 32, item 2): windows of a synthetic trial in which the
-//! markers of one segment are displaced (soft-tissue-like, not swapped) are reported as bad
-//! data, with their markers and frames, and the trial does not fail; a clean trial reports none.
+//! Unfittable frames explained and no limb flips (issue 32, items 1 and 2): windows of a
+//! synthetic trial (a walk, and a fast arm swing as the issue asks) in which the markers of one
+//! segment are displaced (soft-tissue-like, not swapped) are reported as bad data, with their
+//! markers and frames, the trial does not fail, no coordinate jumps (on the fast arm: by more
+//! than the truth's largest step + 10° anywhere), and outside the windows the angles stay within
+//! 1° of the clean solve; a clean trial reports none; a clean fast swing is followed.
 
 use smocap::io::MarkerTrial;
-use smocap::kinematics::synth::{synthesize, SynthOptions};
+use smocap::kinematics::synth::{synthesize_motion, Motion, SynthOptions};
 use smocap::model::CoordinateKind;
 use smocap::pipeline::results::report::trial_report;
 use smocap::pipeline::session::judge;
@@ -38,10 +41,26 @@ fn displaced_segments_are_reported_as_bad_data_and_the_trial_does_not_fail() {
     }
 }
 
+/// The issue's scenario: a fast arm motion (the right shoulder swinging at up to ~1,760°/s, as
+/// in [`a_fast_clean_arm_swing_is_followed`]) with the same displaced windows, one of them on the
+/// swinging arm itself.
+#[test]
+fn displaced_segments_during_a_fast_arm_swing_are_reported_and_do_not_flip() {
+    for seed in [11, 19, 23] {
+        displaced_segments_with_motion(seed, true);
+    }
+}
+
 fn displaced_segments_with(seed: u64) {
-    eprintln!("seed {seed}");
+    displaced_segments_with_motion(seed, false)
+}
+
+fn displaced_segments_with_motion(seed: u64, swing: bool) {
+    eprintln!("seed {seed}{}", if swing { ", fast arm swing" } else { "" });
     let ctx = Context::shipped().unwrap();
-    let s = synthesize(&ctx.model, &ctx.proxy, &SynthOptions { frames: 300, seed, ..SynthOptions::default() });
+    let opt = SynthOptions { frames: 300, seed, ..SynthOptions::default() };
+    let motion = if swing { Motion::FastArm } else { Motion::Walk };
+    let s = synthesize_motion(&ctx.model, &ctx.proxy, &opt, motion).unwrap();
     let cal = calibrate_subject(&ctx, &[("walk", &s.trial)]).unwrap();
     let clean = solve_trial(&ctx, "walk", &s.trial, &cal, 1).unwrap();
     assert!(clean.marker_errors.unfittable.is_empty(), "{:?}", clean.marker_errors.unfittable);
@@ -111,11 +130,16 @@ fn displaced_segments_with(seed: u64) {
         step(&yc),
         step(&yb)
     );
-    // No coordinate jumps by more than the truth's largest step + 10° into, inside or out of a
-    // window (the issue's bound, where the continuity of unfittable frames acts). Elsewhere the
-    // frames fit and are the clean solve's (within 1°, below), steps included: the clean solve's
-    // own steps in a barely observed coordinate (forearm pronation: up to 13.7° here, on frames
-    // that fit to 3 mm) are left to it.
+    // The issue's bound, on its scenario (a fast arm): no coordinate of the solved motion steps
+    // by more than the truth's largest step + 10°, anywhere.
+    if swing {
+        assert!(step(&yb) <= truth_step + 10.0, "a step of {:.2}° (truth's largest {truth_step:.2}°)", step(&yb));
+    }
+    // On a walk the truth's largest step is 2.6–2.8°, below the clean solve's own noise in a
+    // barely observed coordinate (forearm pronation steps up to 13.7° between frames that fit to
+    // 3 mm; solved to convergence, the same: it is the 2 mm marker noise, not the solver), so the
+    // bound is held where the continuity of unfittable frames acts, into, inside and out of a
+    // window; elsewhere the frames fit and are the clean solve's (within 1°, below).
     let touches = |f: usize| inside(f) || inside(f + 1);
     for (&j, c) in rot.iter().zip(steps(&yc)) {
         let name = &ctx.model.coordinates[j].name;
@@ -150,11 +174,9 @@ fn displaced_segments_with(seed: u64) {
 fn a_fast_clean_arm_swing_is_followed() {
     let ctx = Context::shipped().unwrap();
     let k = ctx.proxy.proxies.iter().position(|p| p.name.contains("arm_flex_r")).expect("arm_flex_r");
-    // 70° about 50° at 4 Hz: peak speed 70° · 2π · 4 Hz ≈ 1,760°/s.
-    let amp = 70f64.to_radians();
-    let shape = |t: f64, p: &mut [f64]| p[k] = 50f64.to_radians() + amp * (std::f64::consts::TAU * 4.0 * t).sin();
+    // `Motion::FastArm`: 70° about 50° at 4 Hz, peak speed 70° · 2π · 4 Hz ≈ 1,760°/s.
     let opt = SynthOptions { frames: 200, seed: 12, ..SynthOptions::default() };
-    let s = smocap::kinematics::synth::synthesize_with(&ctx.model, &ctx.proxy, &opt, shape);
+    let s = synthesize_motion(&ctx.model, &ctx.proxy, &opt, Motion::FastArm).unwrap();
     let cal = calibrate_subject(&ctx, &[("swing", &s.trial)]).unwrap();
     let r = solve_trial(&ctx, "swing", &s.trial, &cal, 1).unwrap();
     let speed =

@@ -1,7 +1,7 @@
 //! `smocap synth`: a synthetic trial and its truth.
 
 use crate::io::trc;
-use crate::kinematics::synth::{synthesize, SynthOptions};
+use crate::kinematics::synth::{synthesize_motion, Motion, SynthOptions};
 use anyhow::Context as _;
 use clap::Args;
 use std::path::PathBuf;
@@ -36,6 +36,10 @@ pub struct SynthArgs {
     /// Scale factors are drawn in 1 ± this.
     #[arg(long, default_value_t = 0.1)]
     pub scale_spread: f64,
+    /// The motion: `walk` (every coordinate a sum of slow waves while walking forward) or
+    /// `fast-arm` (the same with the right shoulder swinging at up to ~1,760°/s).
+    #[arg(long, value_enum, default_value_t = Motion::Walk)]
+    pub motion: Motion,
     /// Output TRC file (written in mm).
     #[arg(long)]
     pub out: PathBuf,
@@ -68,7 +72,10 @@ pub fn run(a: SynthArgs) -> anyhow::Result<u8> {
         anyhow::ensure!(v.is_finite() && v >= 0.0, "{flag} must be finite and ≥ 0, got {v}");
     }
     let ctx = super::load_context(a.model.as_deref(), a.profile.as_deref())?;
-    let s = synthesize(&ctx.model, &ctx.proxy, &a.options());
+    let s = synthesize_motion(&ctx.model, &ctx.proxy, &a.options(), a.motion).with_context(|| {
+        "--motion fast-arm: the model has no right shoulder flexion proxy (`arm_flex_r`) to swing; \
+         --motion walk works on any model"
+    })?;
     trc::write_trc(&a.out, &s.trial, "mm").with_context(|| format!("writing {}", a.out.display()))?;
     let json = serde_json::to_string_pretty(&s.truth)?;
     std::fs::write(&a.truth, json).with_context(|| format!("writing {}", a.truth.display()))?;

@@ -94,6 +94,37 @@ pub fn synthesize(model: &Model, proxy: &ProxyMap, opt: &SynthOptions) -> Synthe
     synthesize_with(model, proxy, opt, |_, _| {})
 }
 
+/// A motion imposed on the generic one ([`synthesize_motion`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Motion {
+    /// The generic motion alone: every proxy a sum of slow waves, the model walking forward.
+    #[default]
+    Walk,
+    /// The generic motion with the right shoulder swinging in flexion, 70° about 50° at 4 Hz
+    /// (peak ≈ 1,760°/s): a fast arm, for the solver's continuity checks (issue 32).
+    FastArm,
+}
+
+/// The right shoulder's flexion proxy of `proxy` (`arm_flex_r`), whose swing [`Motion::FastArm`]
+/// imposes.
+fn fast_arm_proxy(proxy: &ProxyMap) -> Option<usize> {
+    proxy.proxies.iter().position(|p| p.name.contains("arm_flex_r"))
+}
+
+/// [`synthesize`] with `motion` imposed; `None` where the model lacks what it moves (a model
+/// without an `arm_flex_r` proxy for [`Motion::FastArm`]).
+pub fn synthesize_motion(model: &Model, proxy: &ProxyMap, opt: &SynthOptions, motion: Motion) -> Option<Synthetic> {
+    match motion {
+        Motion::Walk => Some(synthesize(model, proxy, opt)),
+        Motion::FastArm => {
+            let k = fast_arm_proxy(proxy)?;
+            let (mid, amp, hz) = (50f64.to_radians(), 70f64.to_radians(), 4.0);
+            Some(synthesize_with(model, proxy, opt, |t, p| p[k] = mid + amp * (TAU * hz * t).sin()))
+        }
+    }
+}
+
 /// As [`synthesize`], with `shape(t, p)` called on each frame's proxies (time `t` in s) after the
 /// generic motion is drawn, to impose a motion of one's own on some proxies (a trot, a yoga
 /// sequence). The random streams do not depend on `shape`, so the rest of the trial (scales,
