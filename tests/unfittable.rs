@@ -36,17 +36,20 @@ const WINDOWS: [(&[&str], std::ops::Range<usize>, [f64; 3]); 3] = [
 fn displaced_segments_are_reported_as_bad_data_and_the_trial_does_not_fail() {
     // Seed 19: a barely observed coordinate left where a window's free poses put it, until the
     // frames after a continued run were solved again from it (`jumps::carry_on`).
-    for seed in [11, 19] {
+    for seed in 11..21 {
         displaced_segments_with(seed);
     }
 }
 
 /// The scenario: a fast arm motion (the right shoulder swinging at up to ~1,760°/s, as
 /// in [`a_fast_clean_arm_swing_is_followed`]) with the same displaced windows, one of them on the
-/// swinging arm itself.
+/// swinging arm itself. Seed 22: the run on the swinging arm ended 30.8° from the frame after it
+/// until a run's reach also counted the steps back onto that frame; seed 24: a frame far from
+/// the windows was re-solved by the `auto` pre-solve in the clean trial only (its outlier
+/// threshold had counted the windows' frames) until the threshold left unfittable frames out.
 #[test]
 fn displaced_segments_during_a_fast_arm_swing_are_reported_and_do_not_flip() {
-    for seed in [11, 19, 23] {
+    for seed in 11..31 {
         displaced_segments_with_motion(seed, true);
     }
 }

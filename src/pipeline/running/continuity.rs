@@ -117,18 +117,27 @@ impl JumpLimits {
     }
 
     /// Where a frame of an unfittable run may go (rad): per rotational proxy, within `bound_rad`
-    /// of the `course` of the motion and within `bound_rad × n` of the last solved frame before it
-    /// as continued (`prev`, `n` frames earlier: one bounded step per frame); where the two
-    /// exclude each other (the course moves faster than that), between them. Writes the box's
-    /// centre to `mid` and its half-width to `half` (infinite for the other proxies).
-    pub fn reach(&self, course: &[f64], prev: Option<(&[f64], usize)>, mid: &mut [f64], half: &mut [f64]) {
+    /// of the `course` of the motion, within `bound_rad × n` of the last solved frame before it
+    /// as continued (`prev`, `n` frames earlier: one bounded step per frame) and within
+    /// `bound_rad × m` of the solved frame after the run (`next`, `m` frames later: the run must
+    /// be able to step back onto the motion where it ends); where these exclude each other (the
+    /// course moves faster than that), between the neighbours' reaches. Writes the box's centre
+    /// to `mid` and its half-width to `half` (infinite for the other proxies).
+    pub fn reach(
+        &self,
+        course: &[f64],
+        prev: Option<(&[f64], usize)>,
+        next: Option<(&[f64], usize)>,
+        mid: &mut [f64],
+        half: &mut [f64],
+    ) {
         for (k, b) in self.bound_rad.iter().enumerate() {
             if !b.is_finite() {
                 (mid[k], half[k]) = (course[k], *b);
                 continue;
             }
             let (mut lo, mut hi) = (course[k] - b, course[k] + b);
-            if let Some((pose, n)) = prev {
+            for (pose, n) in [prev, next].into_iter().flatten() {
                 // The neighbour's value in the course's turn (periodic proxies).
                 let c = course[k] + wrap_angle(pose[k] - course[k]);
                 (lo, hi) = (lo.max(c - b * n as f64), hi.min(c + b * n as f64));
@@ -155,13 +164,26 @@ mod tests {
         let limits = JumpLimits { bound_rad: vec![0.1, f64::INFINITY], unfittable_m: 0.01, median_m: 0.003 };
         let (mut mid, mut half) = (vec![0.0; 2], vec![0.0; 2]);
         // Course at 0; the frame before at 0.15: [−0.1, 0.1] ∩ [0.05, 0.25] = [0.05, 0.1].
-        limits.reach(&[0.0, 3.0], Some((&[0.15, 9.0], 1)), &mut mid, &mut half);
+        limits.reach(&[0.0, 3.0], Some((&[0.15, 9.0], 1)), None, &mut mid, &mut half);
         assert!((mid[0] - 0.075).abs() < 1e-12 && (half[0] - 0.025).abs() < 1e-12, "{mid:?} {half:?}");
         assert_eq!((mid[1], half[1]), (3.0, f64::INFINITY));
         assert!(JumpLimits::outside(&mid, &half, &[0.0, 50.0]) && !JumpLimits::outside(&mid, &half, &[0.08, 50.0]));
         // Two frames earlier: two steps. Further than the course allows: between the two.
-        limits.reach(&[0.0, 3.0], Some((&[0.5, 9.0], 2)), &mut mid, &mut half);
+        limits.reach(&[0.0, 3.0], Some((&[0.5, 9.0], 2)), None, &mut mid, &mut half);
         assert!((mid[0] - 0.2).abs() < 1e-12 && (half[0] - 0.1).abs() < 1e-12, "{mid:?} {half:?}");
+    }
+
+    #[test]
+    fn the_last_frame_of_an_unfittable_run_stays_one_bounded_step_from_the_frame_after() {
+        let limits = JumpLimits { bound_rad: vec![0.1], unfittable_m: 0.01, median_m: 0.003 };
+        let (mut mid, mut half) = (vec![0.0], vec![0.0]);
+        // Course at 0, the frame before at 0.05 (one step back), the frame after at −0.12 (one
+        // step on): [−0.1, 0.1] ∩ [−0.05, 0.15] ∩ [−0.22, −0.02] = [−0.05, −0.02].
+        limits.reach(&[0.0], Some((&[0.05], 1)), Some((&[-0.12], 1)), &mut mid, &mut half);
+        assert!((mid[0] + 0.035).abs() < 1e-12 && (half[0] - 0.015).abs() < 1e-12, "{mid:?} {half:?}");
+        // Three frames before the frame after: three steps of room.
+        limits.reach(&[0.0], None, Some((&[-0.12], 3)), &mut mid, &mut half);
+        assert!((mid[0] - 0.0).abs() < 1e-12 && (half[0] - 0.1).abs() < 1e-12, "{mid:?} {half:?}");
     }
 
     #[test]

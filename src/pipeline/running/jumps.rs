@@ -13,7 +13,8 @@ use crate::solve::{FrameSolver, FrameStatus, SolverSettings};
 /// inside it neither end nor break it), every frame whose pose leaves its reach
 /// ([`JumpLimits::reach`]: within `limits.bound_rad` of the course of the motion, the linear
 /// interpolation between the solved frames just before and after the run or the one there is,
-/// and one bounded step from the frame before as continued) is solved again from the course
+/// one bounded step from the frame before as continued, and as many bounded steps from the
+/// solved frame after the run as lie between them) is solved again from the course
 /// with its rotational proxies bounded to that reach. The run's continued poses are kept, all
 /// together (a run half continued would jump where it switches), when its markers were displaced
 /// (the misfit steps in or out within one frame, [`misfit_steps`]: a pose fitting them better is
@@ -72,7 +73,8 @@ fn continue_run(
         if !course_at(results, (before, after), g, &mut course) {
             return Vec::new();
         }
-        limits.reach(&course, last.as_ref().map(|(q, h)| (&q[..], g - h)), &mut mid, &mut half);
+        let next = after.map(|y| (&results[y].as_ref().expect("a solved frame").0[..], y - g));
+        limits.reach(&course, last.as_ref().map(|(q, h)| (&q[..], g - h)), next, &mut mid, &mut half);
         free_sq += old.rmse_m * old.rmse_m;
         if !JumpLimits::outside(&mid, &half, p) {
             cont_sq += old.rmse_m * old.rmse_m;

@@ -19,7 +19,6 @@ use crate::kinematics::assembly::{fold_tracking_reference, Evaluator, FrameProbl
 use crate::kinematics::backend::{BackendError, BatchBackend, EnergyEval, GnSink, GnView};
 use crate::pipeline::running::continuity::{max_jump, FLIP_RAD};
 use crate::solve::init::multi_start_with;
-use crate::solve::presolve::outlier_threshold;
 use crate::solve::trqp::{FrameIteration, Next};
 use crate::solve::{make_qp, FrameSolver, FrameStats, FrameStatus, Presolve, Presolver, SolverSettings, WarmStart};
 use rayon::prelude::*;
@@ -317,7 +316,7 @@ pub fn run_lanes_across<E: From<BackendError>>(
 }
 
 /// `auto` pre-solve: frames whose marker RMSE exceeds the trial's median + 6 MAD
-/// ([`outlier_threshold`]) are solved again from their warm start (the previous solved frame of
+/// ([`super::unfittable::presolve_threshold`]) are solved again from their warm start (the previous solved frame of
 /// their segment, as updated by this pass) with pre-solve, and the result with the lower energy
 /// is kept; the time spent is added to the frame's. Segments' first frames (cold-started from
 /// several starts, [`multi_start_with`]) and bridged frames are left. Frames are visited in order on
@@ -331,7 +330,7 @@ pub fn resolve_outliers(
     results: &mut [Option<FrameResult>],
 ) -> Vec<usize> {
     let rmse: Vec<f64> = results.iter().filter_map(|r| solved(r).map(|r| r.1.rmse_m)).collect();
-    resolve_outliers_above(eval, settings, inp, segments, outlier_threshold(&rmse), results)
+    resolve_outliers_above(eval, settings, inp, segments, super::unfittable::presolve_threshold(&rmse), results)
 }
 
 /// [`resolve_outliers`] with the threshold given (m): the trial's, when `results` and

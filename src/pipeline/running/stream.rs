@@ -473,7 +473,7 @@ fn outlier_threshold_of(held: &[Option<FrameResult>]) -> f64 {
         .iter()
         .filter_map(|r| r.as_ref().filter(|r| r.1.status != FrameStatus::TooFewMarkers).map(|r| r.1.rmse_m))
         .collect();
-    crate::solve::presolve::outlier_threshold(&rmse)
+    crate::pipeline::running::unfittable::presolve_threshold(&rmse)
 }
 
 /// Solves every frame of `trial` for a subject calibrated as `calibration` on the CPU backend,

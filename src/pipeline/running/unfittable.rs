@@ -18,6 +18,17 @@ use serde::{Deserialize, Serialize};
 pub const RMSE_FACTOR: f64 = 3.0;
 /// ... and above this absolute floor (mm): clean trials' noise never flags a frame.
 pub const RMSE_FLOOR_MM: f64 = 10.0;
+
+/// The `auto` pre-solve's outlier threshold ([`crate::solve::presolve::outlier_threshold`]) over
+/// the frames that fit: unfittable frames (bad data, reported on their own) are left out of its
+/// median and MAD, so a trial with a few knocked markers re-solves the same outliers elsewhere
+/// as it would without them (frames of `rmse`, m; NaN where none).
+pub fn presolve_threshold(rmse: &[f64]) -> f64 {
+    let mut v: Vec<f64> = rmse.iter().copied().filter(|x| x.is_finite()).collect();
+    let limit = (RMSE_FACTOR * crate::solve::median(&mut v)).max(RMSE_FLOOR_MM * 1e-3);
+    let fitting: Vec<f64> = rmse.iter().copied().filter(|x| x.is_finite() && *x <= limit).collect();
+    crate::solve::presolve::outlier_threshold(&fitting)
+}
 /// A marker whose distance to an observed marker on its own body differs from the model's by
 /// more than this (mm) moved against its rigid partners.
 pub const RIGID_MOVE_MM: f64 = 10.0;

@@ -35,8 +35,9 @@ pub enum WarmStart {
 pub enum Presolve {
     /// Never: every frame starts from its warm start (the behaviour before pre-solve existed).
     Never,
-    /// After a trial is solved, frames whose marker RMSE exceeds median + 6 MAD of the trial
-    /// are solved again with pre-solve from their warm start; the lower-energy result is kept.
+    /// After a trial is solved, frames whose marker RMSE exceeds median + 6 MAD of the trial's
+    /// frames that fit (unfittable frames, bad data, left out) are solved again with pre-solve
+    /// from their warm start; the lower-energy result is kept.
     #[default]
     Auto,
     /// Every warm-started frame is pre-solved before its trust-region QP.
