@@ -41,6 +41,7 @@ Deterministic: fixed file order, a seeded RNG, a fixed sign convention for the P
 import argparse
 import gzip
 import hashlib
+import heapq
 import io
 import json
 import os
@@ -261,8 +262,6 @@ def smooth_trunk_weights(W, pos, tris):
     40 times (the drop jumps); a zone of ~2.5 sigma keeps it under twice. (Heat diffusion,
     whose kernel has long tails, spread the upper arms' weights over the chest instead.)
     Pure Python Dijkstra, deterministic. Returns (W', vertices smoothed)."""
-    import heapq
-
     cols = [SEGMENTS.index(s) for s in TRUNK]
     inside = W[:, cols].sum(axis=1) >= 0.999
     n = len(W)

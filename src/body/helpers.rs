@@ -1,5 +1,6 @@
 //! Helper joints: skin blended between a body and its descendant turns through intermediate
-//! frames instead of being averaged between the two ends (docs/body.md, "Helper joints").
+//! frames instead of being averaged between the two ends (docs/guide/rendering-and-synthetic-video.md,
+//! "How the skin bends").
 //!
 //! Linear-blend skinning averages a vertex's positions under its bodies' transforms. Between a
 //! pelvis and a thigh flexed 90° that average lies on the chord of the arc the vertex should
@@ -7,8 +8,9 @@
 //! 0.71 of its distance). Here each pair `(a, d)` of a body and its descendant that share
 //! vertices gets [`STEPS`]` − 1` helper joints at fractions `k / STEPS` of `d`'s rotation
 //! relative to `a` (since the bind pose), turning about the joint centre (the origin of the
-//! body below `a` on the way to `d`). A vertex whose two largest influences are `a` and `d`,
-//! with `t = w_d / (w_a + w_d)`, is blended between the two neighbouring frames of the chain
+//! body below `a` on the way to `d`). A vertex carried by `a` and descendants `d` of it (each
+//! `a` its nearest ancestor among the vertex's bodies), with `t` their share of the weight
+//! ([`split`]), is blended between the two neighbouring frames of each chain
 //! `a, h_1, …, h_{STEPS−1}, d` that bracket `t` (linear blending over a quarter of the angle:
 //! a chord at 11° of a 45° step keeps 99.5 % of the radius). It is still linear-blend
 //! skinning over more joints, so glTF viewers show the same mesh ([`crate::render::scene`]
