@@ -296,6 +296,7 @@ fn posing_the_body_mesh_allocates_nothing_once_warm() {
     let wfm = nalgebra::UnitQuaternion::identity();
     let (body, _) = smocap::body::dress_subject(&ctx.model, &wfm, &asset, &scales, &sub).unwrap();
     assert!(!body.binding.helpers.helpers.is_empty(), "the shipped model's body has helper joints");
+    assert!(!body.correctives.is_empty(), "and volume correctives");
     let mut ws = smocap::body::PoseWorkspace::new(&ctx.model, &body);
     let states: Vec<Vec<f64>> = (0..s.truth.coordinates.len())
         .map(|f| {

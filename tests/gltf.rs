@@ -66,7 +66,8 @@ fn world_at_key(doc: &gltf::Gltf, key: usize) -> (Vec<Matrix4<f64>>, Vec<String>
                 gltf::animation::util::ReadOutputs::Translations(mut t) => trs[i].0 = t.nth(key).unwrap(),
                 gltf::animation::util::ReadOutputs::Rotations(q) => trs[i].1 = q.into_f32().nth(key).unwrap(),
                 gltf::animation::util::ReadOutputs::Scales(mut s) => trs[i].2 = s.nth(key).unwrap(),
-                _ => panic!("unexpected animation path"),
+                gltf::animation::util::ReadOutputs::MorphTargetWeights(_) => {} // [`morph_weights_at_key`]
+
             }
         }
     }
@@ -254,9 +255,23 @@ fn gltf_cameras_sit_at_the_rigs_centres_looking_along_their_optical_axes() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Node `node`'s animated morph target weights (`targets` of them) at key `key`.
+fn morph_weights_at_key(doc: &gltf::Gltf, node: usize, targets: usize, key: usize) -> Vec<f64> {
+    let blob = doc.blob.as_deref().unwrap();
+    for anim in doc.document.animations() {
+        for ch in anim.channels().filter(|c| c.target().node().index() == node) {
+            if let gltf::animation::util::ReadOutputs::MorphTargetWeights(w) = ch.reader(|_| Some(blob)).read_outputs().unwrap() {
+                return w.into_f32().skip(key * targets).take(targets).map(|x| x as f64).collect();
+            }
+        }
+    }
+    vec![0.0; targets]
+}
+
 /// The skinned body of a glTF export (`export --gltf`), skinned the way a viewer does it (each
-/// vertex `Σ w_j · world_j · inverse_bind_j · rest`, joints and weights as written, helper
-/// joints included) against smocap's own posed mesh at the same frames: (median, max) distance (m).
+/// vertex `Σ w_j · world_j · inverse_bind_j · (rest + Σ_k m_k δ_k)`, joints, weights, morph
+/// targets and their animated weights as written, helper joints included) against smocap's own
+/// posed mesh at the same frames: (median, max) distance (m).
 fn gltf_skin_error(take: &Take) -> (f64, f64) {
     let asset = smocap::body::BodyAsset::shipped().unwrap();
     let sub = smocap::body::SubjectBody { stature_m: None, info: Default::default() };
@@ -279,6 +294,8 @@ fn gltf_skin_error(take: &Take) -> (f64, f64) {
     let rest: Vec<[f32; 3]> = r.read_positions().unwrap().collect();
     let js: Vec<[u16; 4]> = r.read_joints(0).unwrap().into_u16().collect();
     let ws_: Vec<[f32; 4]> = r.read_weights(0).unwrap().into_f32().collect();
+    let targets: Vec<Vec<[f32; 3]>> = r.read_morph_targets().map(|(p, _, _)| p.unwrap().collect()).collect();
+    assert_eq!(targets.len(), body.correctives.len(), "one morph target per corrective");
     let mut pose_ws = smocap::body::PoseWorkspace::new(&take.model, &body);
     let scene = Up::Z.scene_from_world();
     let mut d = Vec::new();
@@ -289,8 +306,12 @@ fn gltf_skin_error(take: &Take) -> (f64, f64) {
         let mut y = take.q[key][..nq].to_vec();
         y.extend_from_slice(&take.scales);
         body.pose(&take.model, &y, &mut pose_ws);
+        let m = morph_weights_at_key(&doc, node.index(), targets.len(), key);
         for (v, ((p, j), w)) in rest.iter().zip(&js).zip(&ws_).enumerate() {
-            let p = nalgebra::Vector4::new(p[0] as f64, p[1] as f64, p[2] as f64, 1.0);
+            let mut p = nalgebra::Vector4::new(p[0] as f64, p[1] as f64, p[2] as f64, 1.0);
+            for (t, mk) in targets.iter().zip(&m) {
+                p += nalgebra::Vector4::new(t[v][0] as f64, t[v][1] as f64, t[v][2] as f64, 0.0) * *mk;
+            }
             let s: nalgebra::Vector4<f64> = (0..4).map(|k| mats[j[k] as usize] * p * w[k] as f64).sum();
             let ours = pose_ws.vertices[v].map(|x| x as f64);
             d.push((s.xyz() - scene * Vector3::from(ours)).norm());

@@ -29,6 +29,19 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 
+/// Each vertex's neighbours along the edges of `triangles` (`n` vertices), ascending.
+pub fn neighbours(triangles: &[[u32; 3]], n: usize) -> Vec<Vec<u32>> {
+    let mut out = vec![Vec::new(); n];
+    for (a, b) in edges(triangles) {
+        out[a as usize].push(b);
+        out[b as usize].push(a);
+    }
+    for v in &mut out {
+        v.sort_unstable();
+    }
+    out
+}
+
 /// Signed enclosed volume (m³; positive for outward counter-clockwise triangles).
 pub fn volume(vertices: &[[f32; 3]], triangles: &[[u32; 3]]) -> f64 {
     triangles

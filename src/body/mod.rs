@@ -26,6 +26,8 @@
 
 pub mod asset;
 pub mod bind;
+pub mod corrective;
+pub mod correctives;
 pub mod fit;
 pub mod helpers;
 pub mod influence;

@@ -15,6 +15,7 @@
 
 use super::asset::{BodyAsset, BodyShape, Phenotype};
 use super::bind::{bind, bind_from, Binding};
+use super::corrective::Corrective;
 use super::segments::BindError;
 use crate::kinematics::cpu::{forward, Workspace};
 use crate::model::anthropometry::Sex;
@@ -38,6 +39,9 @@ pub struct Dressed {
     pub sole: Vec<u32>,
     /// The shaping to the subject's markers, where it was done ([`super::fit`]).
     pub fit: Option<ShapeFit>,
+    /// Volume-preserving pose correctives ([`super::correctives`]; empty until
+    /// [`super::dress_subject_with`] measures them at the subject's scales).
+    pub correctives: Vec<Corrective>,
 }
 
 /// What the fit to the markers did ([`super::fit`]), per segment and overall.
@@ -69,6 +73,9 @@ pub struct PoseWorkspace {
     /// Per joint: its rotation in the output frame (no scale); per body, at the bind state.
     turn: Vec<Matrix3<f64>>,
     bind_turn: Vec<Matrix3<f64>>,
+    /// Per joint: its rotation since the bind pose (output frame); per corrective, its weight.
+    since: Vec<Matrix3<f64>>,
+    pub morph: Vec<f64>,
 }
 
 impl PoseWorkspace {
@@ -78,8 +85,39 @@ impl PoseWorkspace {
         (self.turn[j], self.pos[j])
     }
 
+    /// Body `b`'s rotation since the bind pose (output frame), after [`Dressed::pose_joints`].
+    pub fn since_bind(&self, b: usize) -> Matrix3<f64> {
+        self.since[b]
+    }
+
+    /// Turns body `b`'s map by `g` about `centre` (output frame; helpers and correctives' joints
+    /// stale until [`PoseWorkspace::refresh_helpers`]).
+    pub(super) fn turn_body(&mut self, b: usize, g: &Matrix3<f64>, centre: &Vector3<f64>) {
+        self.turn[b] = g * self.turn[b];
+        self.rot[b] = g * self.rot[b];
+        self.pos[b] = centre + g * (self.pos[b] - centre);
+    }
+
+    /// Recomputes the helpers' frames and every joint's rotation since the bind pose.
+    pub(super) fn refresh_helpers(&mut self, body: &Dressed) {
+        let hs = &body.binding.helpers.helpers;
+        super::helpers::frames(hs, &self.bind_turn, &mut self.rot, &mut self.pos, &mut self.turn);
+        let nb = self.bind_turn.len();
+        for j in 0..self.turn.len() {
+            let base = if j < nb { j } else { hs[j - nb].parent };
+            self.since[j] = self.turn[j] * self.bind_turn[base].transpose();
+        }
+    }
+
+    /// The joints' rotations since the bind pose and the posed vertices.
+    pub(super) fn corrective_parts(&mut self) -> (&[Matrix3<f64>], &mut [[f32; 3]]) {
+        (&self.since, &mut self.vertices)
+    }
+
     pub fn new(model: &Model, body: &Dressed) -> PoseWorkspace {
         PoseWorkspace {
+            since: vec![Matrix3::identity(); model.nb() + body.binding.helpers.helpers.len()],
+            morph: vec![0.0; body.correctives.len()],
             kin: Workspace::new(model),
             vertices: vec![[0.0; 3]; body.binding.influences.len()],
             rot: vec![Matrix3::identity(); model.nb() + body.binding.helpers.helpers.len()],
@@ -200,6 +238,7 @@ impl Dressed {
             triangles: asset.triangles.clone(),
             sole: right_foot(asset),
             fit: None,
+            correctives: Vec::new(),
         }
     }
 
@@ -229,17 +268,25 @@ impl Dressed {
     }
 
     /// Poses the body at state `y = [q; s]`: [`Dressed::pose_joints`], then [`Dressed::skin`]
-    /// into `ws.vertices`. Allocates nothing.
+    /// into `ws.vertices` and the correctives at their weights. Allocates nothing.
     pub fn pose(&self, model: &Model, y: &[f64], ws: &mut PoseWorkspace) {
         self.pose_joints(model, y, ws);
+        self.skin_only(ws);
+        for (k, c) in self.correctives.iter().enumerate() {
+            c.add_to(ws.morph[k], &self.binding.helpers.joints, &ws.since, &mut ws.vertices);
+        }
+    }
+
+    /// Linear-blend skinning of the joints posed in `ws` into `ws.vertices`, no correctives.
+    pub(super) fn skin_only(&self, ws: &mut PoseWorkspace) {
         self.skin(&ws.rot, &ws.pos, &mut ws.vertices);
     }
 
     /// Forward kinematics and every joint's map (bodies, then helpers) at state `y`, read with
-    /// [`PoseWorkspace::joint`]. Allocates nothing.
+    /// [`PoseWorkspace::joint`], and the correctives' weights (`ws.morph`). Allocates nothing.
     pub fn pose_joints(&self, model: &Model, y: &[f64], ws: &mut PoseWorkspace) {
         forward(model, y, &mut ws.kin);
-        let PoseWorkspace { kin, rot, pos, turn, bind_turn, .. } = ws;
+        let PoseWorkspace { kin, rot, pos, turn, .. } = ws;
         let r0 = self.binding.world_from_model.to_rotation_matrix().into_inner();
         for b in 0..model.nb() {
             let i = model.scale_index(b, 0);
@@ -248,7 +295,10 @@ impl Dressed {
             rot[b] = turn[b] * Matrix3::from_diagonal(&Vector3::new(y[i], y[i + 1], y[i + 2]));
             pos[b] = r0 * kin.body_pos[b];
         }
-        super::helpers::frames(&self.binding.helpers.helpers, bind_turn, rot, pos, turn);
+        ws.refresh_helpers(self);
+        for (k, c) in self.correctives.iter().enumerate() {
+            ws.morph[k] = c.weight(&ws.since[c.parent], &ws.since[c.child]);
+        }
     }
 
     /// Linear-blend skinning with `rot[j]`, `pos[j]`: each joint's (bodies, then helpers) map

@@ -112,6 +112,7 @@ pub fn dress_subject_with(
         let volume = sub.info.mass_kg.map(|m| m / BODY_DENSITY);
         body.fit = Some(fit_to_markers(model, &mut body, asset, scales, Some(stature), volume, poses, fit));
         mass = posed_mass(model, &body, scales);
+        body.correctives = super::correctives::build(model, &body, asset, scales);
     }
     let height = body.bind_pose_height(model, scales);
     let what = match (sub.stature_m, sub.info.height_m) {

@@ -72,6 +72,9 @@ pub struct Primitive {
     /// the skin's joints and their weights (summing to 1).
     pub joints: Vec<[u16; 4]>,
     pub weights: Vec<[f32; 4]>,
+    /// Morph targets: per target, a position displacement per position (the primitive's
+    /// frame, before skinning), blended by the mesh's weights.
+    pub targets: Vec<Vec<[f32; 3]>>,
 }
 
 /// A skin: its joints (node indices) and each joint's inverse bind matrix (column-major 4×4).
@@ -87,6 +90,8 @@ pub struct Skin {
 pub struct Mesh {
     pub name: String,
     pub primitives: Vec<Primitive>,
+    /// Default morph target weights (one per target of its primitives; empty without targets).
+    pub weights: Vec<f32>,
 }
 
 /// A plain coloured material (linear RGBA, metallic 0).
@@ -116,6 +121,8 @@ pub enum Values {
     /// Unit quaternions `[x, y, z, w]`.
     Rotation(Vec<[f32; 4]>),
     Scale(Vec<[f32; 3]>),
+    /// Morph target weights: `per_key` (the mesh's target count) per key time, key by key.
+    Weights { per_key: usize, values: Vec<f32> },
 }
 
 /// One animated property of one node.
@@ -303,6 +310,18 @@ pub fn to_glb(doc: &Document) -> Result<Vec<u8>, GltfError> {
                 let w: Vec<f32> = p.weights.iter().flatten().copied().collect();
                 attributes.insert(Valid(json::mesh::Semantic::Weights(0)), b.floats(&w, Type::Vec4, 4, false, target));
             }
+            if p.targets.len() != m.weights.len() || p.targets.iter().any(|t| t.len() != p.positions.len()) {
+                return Err(bad("morph targets do not match the positions or the mesh's weights".into()));
+            }
+            let targets: Vec<json::mesh::MorphTarget> = p
+                .targets
+                .iter()
+                .map(|t| {
+                    let d: Vec<f32> = t.iter().flatten().copied().collect();
+                    let positions = Some(b.floats(&d, Type::Vec3, 3, true, target));
+                    json::mesh::MorphTarget { positions, normals: None, tangents: None }
+                })
+                .collect();
             primitives.push(json::mesh::Primitive {
                 attributes,
                 extensions: None,
@@ -310,7 +329,7 @@ pub fn to_glb(doc: &Document) -> Result<Vec<u8>, GltfError> {
                 indices: Some(b.indices(&p.indices)),
                 material: Some(json::Index::new(p.material as u32)),
                 mode: Valid(json::mesh::Mode::Triangles),
-                targets: None,
+                targets: (!targets.is_empty()).then_some(targets),
             });
         }
         b.root.push(json::Mesh {
@@ -318,7 +337,7 @@ pub fn to_glb(doc: &Document) -> Result<Vec<u8>, GltfError> {
             extras: Default::default(),
             name: Some(m.name.clone()),
             primitives,
-            weights: None,
+            weights: (!m.weights.is_empty()).then(|| m.weights.clone()),
         });
     }
     for c in &doc.cameras {
@@ -462,11 +481,18 @@ fn animation(b: &mut Builder, a: &Animation, nodes: usize) -> Result<(), GltfErr
             Values::Scale(v) => {
                 (v.iter().flatten().copied().collect(), Type::Vec3, 3, json::animation::Property::Scale)
             }
+            Values::Weights { per_key, values } => {
+                (values.clone(), Type::Scalar, *per_key, json::animation::Property::MorphTargetWeights)
+            }
         };
         if data.len() != n * times.len() {
             return Err(bad(format!("{} values for {} key times", data.len() / n, times.len())));
         }
-        let output = b.floats(&data, type_, n, false, None);
+        let output = match type_ {
+            // one scalar per target and key: the accessor counts them all
+            Type::Scalar => b.floats(&data, type_, 1, false, None),
+            _ => b.floats(&data, type_, n, false, None),
+        };
         let sampler = json::Index::push(
             &mut samplers,
             json::animation::Sampler {

@@ -114,7 +114,7 @@ pub fn document_with_body(
     for (name, side) in [("left", 0), ("right", 1), ("centre", 2), ("observed", 3)] {
         let mut p = sphere(Vector3::zeros(), MARKER_RADIUS_M);
         p.material = side;
-        doc.meshes.push(Mesh { name: format!("marker_{name}"), primitives: vec![p] });
+        doc.meshes.push(Mesh { name: format!("marker_{name}"), primitives: vec![p], weights: Vec::new() });
     }
     let mut world = Node::new("world", None);
     world.rotation = xyzw(&up.scene_from_world());
@@ -149,7 +149,7 @@ pub fn document_with_body(
         }
         if !prims.is_empty() {
             n.mesh = Some(doc.meshes.len());
-            doc.meshes.push(Mesh { name: format!("bones:{}", body.name), primitives: prims });
+            doc.meshes.push(Mesh { name: format!("bones:{}", body.name), primitives: prims, weights: Vec::new() });
         }
         doc.nodes.push(n);
     }
@@ -193,19 +193,20 @@ pub fn document_with_body(
             zfar: 1000.0,
         });
     }
-    let helpers = dressed.map(|d| skinned_body(&mut doc, take, up, d));
+    let skinned = dressed.map(|d| skinned_body(&mut doc, take, up, d));
     let mut anim = animation(take, first_obs, &mut ws);
-    if let (Some(body), Some(first)) = (dressed, helpers) {
-        anim.tracks.extend(helper_tracks(take, body, first));
+    if let (Some(body), Some((first, node))) = (dressed, skinned) {
+        anim.tracks.extend(body_tracks(take, body, first, node));
     }
     doc.animation = Some(anim);
     Ok(doc)
 }
 
-/// Adds the root node `body`, its mesh and its skin over the body nodes (`2 + b`) and the
-/// helper joints ([`crate::body::helpers`]: nodes under `model`, animated by
-/// [`helper_tracks`]); returns the first helper node's index.
-fn skinned_body(doc: &mut Document, take: &Take, up: Up, body: &Dressed) -> usize {
+/// Adds the root node `body`, its mesh (with the correctives as morph targets,
+/// [`crate::body::correctives`]) and its skin over the body nodes (`2 + b`) and the helper
+/// joints ([`crate::body::helpers`]: nodes under `model`), animated by [`body_tracks`]; returns
+/// the first helper node's index and the `body` node's.
+fn skinned_body(doc: &mut Document, take: &Take, up: Up, body: &Dressed) -> (usize, usize) {
     let model = &take.model;
     let mut ws = PoseWorkspace::new(model, body);
     body.pose(model, &body.bind_state(model, &take.scales), &mut ws);
@@ -250,6 +251,14 @@ fn skinned_body(doc: &mut Document, take: &Take, up: Up, body: &Dressed) -> usiz
         material: doc.materials.len(),
         ..Default::default()
     };
+    for k in &body.correctives {
+        let mut t = vec![[0f32; 3]; prim.positions.len()];
+        for (&v, d) in k.vertices.iter().zip(&k.deltas) {
+            let p = s * Vector3::new(d[0] as f64, d[1] as f64, d[2] as f64);
+            t[v as usize] = [p.x as f32, p.y as f32, p.z as f32];
+        }
+        prim.targets.push(t);
+    }
     doc.materials.push(Material { name: "skin".into(), rgba: [0.8, 0.62, 0.5, 1.0] });
     for inf in &body.binding.helpers.joints {
         prim.joints.push(inf.map(|x| if x.weight > 0.0 { x.joint } else { 0 }));
@@ -275,13 +284,15 @@ fn skinned_body(doc: &mut Document, take: &Take, up: Up, body: &Dressed) -> usiz
     let mut n = Node::new("body", None);
     n.mesh = Some(doc.meshes.len());
     n.skin = Some(0);
-    doc.meshes.push(Mesh { name: "body".into(), primitives: vec![prim] });
+    let weights = vec![0.0; body.correctives.len()];
+    doc.meshes.push(Mesh { name: "body".into(), primitives: vec![prim], weights });
     doc.nodes.push(n);
-    first_helper
+    (first_helper, doc.nodes.len() - 1)
 }
 
-/// The helper joints' poses per frame (nodes `first..`, in the model's frame).
-fn helper_tracks(take: &Take, body: &Dressed, first: usize) -> Vec<Track> {
+/// The helper joints' poses per frame (nodes `first..`, in the model's frame) and the
+/// correctives' weights (node `node`'s morph targets).
+fn body_tracks(take: &Take, body: &Dressed, first: usize, node: usize) -> Vec<Track> {
     let (model, nb, n) = (&take.model, take.model.nb(), take.len());
     let nh = body.binding.helpers.helpers.len();
     let r0t = body.binding.world_from_model.inverse().to_rotation_matrix().into_inner();
@@ -289,10 +300,12 @@ fn helper_tracks(take: &Take, body: &Dressed, first: usize) -> Vec<Track> {
     let mut trans = vec![Vec::with_capacity(n); nh];
     let mut rots: Vec<Vec<[f32; 4]>> = vec![Vec::with_capacity(n); nh];
     let mut y = vec![0.0; model.ny()];
+    let mut morph = Vec::with_capacity(n * body.correctives.len());
     for i in 0..n {
         y[..model.nq()].copy_from_slice(&take.q[i]);
         y[model.nq()..].copy_from_slice(&take.scales);
         body.pose_joints(model, &y, &mut ws);
+        morph.extend(ws.morph.iter().map(|&w| w as f32));
         for k in 0..nh {
             let (r, t) = ws.joint(nb + k);
             let t = r0t * t;
@@ -310,6 +323,10 @@ fn helper_tracks(take: &Take, body: &Dressed, first: usize) -> Vec<Track> {
     for (k, (t, r)) in trans.into_iter().zip(rots).enumerate() {
         tracks.push(Track { node: first + k, values: Values::Translation(t), step: false });
         tracks.push(Track { node: first + k, values: Values::Rotation(r), step: false });
+    }
+    if !body.correctives.is_empty() {
+        let per_key = body.correctives.len();
+        tracks.push(Track { node, values: Values::Weights { per_key, values: morph }, step: false });
     }
     tracks
 }
