@@ -14,6 +14,7 @@
 //! needs and their tests, whose zip and NPY readers check the encoders' byte layouts.
 
 use crate::model::math;
+use nalgebra::{Matrix3, Vector3};
 use std::path::Path;
 
 /// A robot's motion in MuJoCo's `qpos` order, sampled at `fps`.
@@ -243,14 +244,14 @@ pub struct TargetRecord {
     pub robot_bodies: Vec<String>,
     pub human_bodies: Vec<String>,
     pub weights: Vec<[f64; 2]>,
-    /// Per frame, per task: target position (m, world) and orientation (row-major 3×3, world).
-    pub pos: Vec<Vec<[f64; 3]>>,
-    pub rot: Vec<Vec<[f64; 9]>>,
+    /// Per frame, per task: target position (m, world) and orientation (world).
+    pub pos: Vec<Vec<Vector3<f64>>>,
+    pub rot: Vec<Vec<Matrix3<f64>>>,
     /// Per frame, per task: the human joint centre it comes from (m, world, unscaled).
-    pub human: Vec<Vec<[f64; 3]>>,
-    /// The feet's robot bodies and, per frame, whether each is planted (1) or not (0).
+    pub human: Vec<Vec<Vector3<f64>>>,
+    /// The feet's robot bodies and, per frame, whether each is planted.
     pub feet: Vec<String>,
-    pub contact: Vec<Vec<f64>>,
+    pub contact: Vec<Vec<bool>>,
 }
 
 /// Writes `t` as an NPZ: `fps` (), `robot_bodies`/`human_bodies` (tasks,) `<U…`, `weights`
@@ -274,11 +275,12 @@ pub fn write_targets_npz(path: &Path, t: &TargetRecord) -> Result<(), FilesError
         ("robot_bodies.npy", npy_str(&t.robot_bodies)),
         ("human_bodies.npy", npy_str(&t.human_bodies)),
         ("weights.npy", npy_f64(&[n, 2], t.weights.iter().flatten().copied())),
-        ("pos.npy", npy_f64(&[f, n, 3], t.pos.iter().flatten().flatten().copied())),
-        ("rot.npy", npy_f64(&[f, n, 3, 3], t.rot.iter().flatten().flatten().copied())),
-        ("human.npy", npy_f64(&[f, n, 3], t.human.iter().flatten().flatten().copied())),
+        ("pos.npy", npy_f64(&[f, n, 3], t.pos.iter().flatten().flat_map(|p| [p.x, p.y, p.z]))),
+        // Row-major: the transpose's columns.
+        ("rot.npy", npy_f64(&[f, n, 3, 3], t.rot.iter().flatten().flat_map(|r| r.transpose().data.0).flatten())),
+        ("human.npy", npy_f64(&[f, n, 3], t.human.iter().flatten().flat_map(|p| [p.x, p.y, p.z]))),
         ("feet.npy", npy_str(&t.feet)),
-        ("contact.npy", npy_f64(&[f, nf], t.contact.iter().flatten().copied())),
+        ("contact.npy", npy_f64(&[f, nf], t.contact.iter().flatten().map(|&c| f64::from(u8::from(c))))),
     ];
     write_atomic(path, &zip_stored(&entries))
 }

@@ -61,19 +61,19 @@ pub struct Retargeted {
     pub targets: files::TargetRecord,
 }
 
-/// The targets of `plan` as a [`files::TargetRecord`].
-fn target_record(robot: &Robot, plan: &Plan, human: &Human, t: &targets::Targets, fps: f64) -> files::TargetRecord {
+/// The targets of `plan` as a [`files::TargetRecord`] (moved, not copied).
+fn target_record(robot: &Robot, plan: &Plan, human: &Human, t: targets::Targets, fps: f64) -> files::TargetRecord {
     let body = |b: usize| robot.model.bodies[b].name.clone();
     files::TargetRecord {
         fps,
         robot_bodies: plan.tasks.iter().map(|k| body(k.robot_body)).collect(),
         human_bodies: plan.tasks.iter().map(|k| human.model.bodies[k.human_body].name.clone()).collect(),
         weights: plan.tasks.iter().map(|k| [k.w_pos, k.w_rot]).collect(),
-        pos: t.pos.iter().map(|f| f.iter().map(|p| [p.x, p.y, p.z]).collect()).collect(),
-        rot: t.rot.iter().map(|f| f.iter().map(|r| std::array::from_fn(|i| r[(i / 3, i % 3)])).collect()).collect(),
-        human: t.human.iter().map(|f| f.iter().map(|p| [p.x, p.y, p.z]).collect()).collect(),
+        pos: t.pos,
+        rot: t.rot,
+        human: t.human,
         feet: plan.feet.iter().map(|f| body(f.robot_body)).collect(),
-        contact: t.contact.iter().map(|c| c.iter().map(|&b| f64::from(u8::from(b))).collect()).collect(),
+        contact: t.contact,
     }
 }
 
@@ -174,6 +174,6 @@ pub fn retarget(human: &Human, robot: &Robot, plan: &Plan, settings: &RetargetSe
     }
     let fps = if n > 1 { (n - 1) as f64 / (human.times[n - 1] - human.times[0]).max(1e-9) } else { 0.0 };
     let (motion, report, poses) = out.finish(robot, plan, human, &targets, &all_q, fps, settings, name);
-    let targets = target_record(robot, plan, human, &targets, fps);
+    let targets = target_record(robot, plan, human, targets, fps);
     Retargeted { motion, report, q: all_q, poses, targets }
 }

@@ -158,7 +158,7 @@ impl Recorder {
             let low = s.lowest_of(f.robot_body);
             self.feet[k].push((ws.body_pos[f.robot_body], low));
         }
-        let closest = s.closest_pair();
+        let closest = s.frame_closest();
         self.closest.push(closest);
         self.iterations += used;
     }
@@ -184,11 +184,14 @@ impl Recorder {
             .iter()
             .zip(&self.errors)
             .filter(|(task, _)| task.w_pos > 0.0)
-            .map(|(task, e)| Tracking {
-                robot: rm.bodies[task.robot_body].name.clone(),
-                human: hname(task.human_body),
-                median_mm: quantile(e, 0.5) * 1e3,
-                p95_mm: quantile(e, 0.95) * 1e3,
+            .map(|(task, e)| {
+                let [median, p95] = quantiles(e, [0.5, 0.95]);
+                Tracking {
+                    robot: rm.bodies[task.robot_body].name.clone(),
+                    human: hname(task.human_body),
+                    median_mm: median * 1e3,
+                    p95_mm: p95 * 1e3,
+                }
             })
             .collect();
         // End effectors: the root and every position task no other task hangs from.
@@ -254,7 +257,7 @@ impl Recorder {
             scale: plan.tasks.iter().skip(1).map(|t| (rm.bodies[t.robot_body].name.clone(), t.ratio)).collect(),
             leg_ratio: plan.leg_ratio,
             tracking,
-            end_effector_median_mm: quantile(&leaves, 0.5) * 1e3,
+            end_effector_median_mm: quantiles(&leaves, [0.5])[0] * 1e3,
             non_finite_frames: q.iter().filter(|f| f.iter().any(|v| !v.is_finite())).count(),
             range_violations,
             velocity_violations,
@@ -278,12 +281,12 @@ impl Recorder {
     }
 }
 
-/// The `p`-quantile (nearest rank) of `v`; 0 when empty.
-fn quantile(v: &[f64], p: f64) -> f64 {
+/// The `p`-quantiles (nearest rank) of `v`, sorted once; 0 when empty.
+fn quantiles<const N: usize>(v: &[f64], p: [f64; N]) -> [f64; N] {
     if v.is_empty() {
-        return 0.0;
+        return [0.0; N];
     }
     let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    s[((s.len() - 1) as f64 * p).round() as usize]
+    s.sort_unstable_by(f64::total_cmp);
+    p.map(|p| s[((s.len() - 1) as f64 * p).round() as usize])
 }

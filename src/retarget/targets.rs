@@ -120,7 +120,8 @@ pub struct Targets {
     pub contact: Vec<Vec<bool>>,
 }
 
-/// Human joint centres and orientations (world) of state `q`.
+/// Human joint centres and orientations (world) of state `q`, of `bodies` (ascending, each
+/// one's parent listed before it); the other bodies' entries are zero.
 fn human_frame(
     h: &Human,
     q: &[f64],
@@ -134,14 +135,31 @@ fn human_frame(
     // The bodies only: the markers are not needed.
     cpu::forward_part(h.model, y, ws, bodies, &[]);
     let w = *h.world_from_model.to_rotation_matrix().matrix();
-    let centres = (0..h.model.nb())
-        .map(|b| {
-            let s = Vector3::new(h.scales[3 * b], h.scales[3 * b + 1], h.scales[3 * b + 2]);
-            let c = s.component_mul(&h.model.bodies[b].joint.child_offset.translation.vector);
-            w * (ws.body_pos[b] + ws.body_rot[b] * c)
-        })
-        .collect();
-    (centres, ws.body_rot.iter().map(|r| w * r).collect())
+    let (mut centres, mut rots) = (vec![Vector3::zeros(); h.model.nb()], vec![Matrix3::zeros(); h.model.nb()]);
+    for &b in bodies {
+        let s = Vector3::new(h.scales[3 * b], h.scales[3 * b + 1], h.scales[3 * b + 2]);
+        let c = s.component_mul(&h.model.bodies[b].joint.child_offset.translation.vector);
+        centres[b] = w * (ws.body_pos[b] + ws.body_rot[b] * c);
+        rots[b] = w * ws.body_rot[b];
+    }
+    (centres, rots)
+}
+
+/// The human bodies the targets and contacts read (tasks' bodies, their carriers, the feet's heels
+/// and toes) and their ancestors, ascending; all bodies unless every parent precedes its child.
+fn needed_bodies(model: &Model, plan: &Plan) -> Vec<usize> {
+    let mut need = vec![false; model.nb()];
+    let read = plan.tasks.iter().flat_map(|t| [t.human_body, t.carrier]);
+    for b in read.chain(plan.feet.iter().flat_map(|f| [f.heel, f.toe])) {
+        for &a in model.chain(b) {
+            need[a] = true;
+        }
+        need[b] = true;
+    }
+    if model.bodies.iter().enumerate().any(|(b, body)| body.parent.is_some_and(|p| p >= b)) {
+        return (0..model.nb()).collect();
+    }
+    (0..model.nb()).filter(|&b| need[b]).collect()
 }
 
 /// The human's reference posture: every rotational coordinate 0, translations at default.
@@ -264,7 +282,7 @@ impl Plan {
         let n = human.q.len();
         let mut ws = Workspace::new(human.model);
         let mut y = Vec::new();
-        let bodies: Vec<usize> = (0..human.model.nb()).collect();
+        let bodies = needed_bodies(human.model, self);
         let frames: Vec<_> = human.q.iter().map(|q| human_frame(human, q, &mut ws, &mut y, &bodies)).collect();
         let standing = |body: usize| percentile(frames.iter().map(|(c, _)| c[body].z).collect(), 0.05);
         let heel_floor = self.feet.iter().map(|f| standing(f.heel)).fold(f64::INFINITY, f64::min);

@@ -12,12 +12,14 @@
 //! below the ground lifts the root by that much (a pure translation: joints untouched).
 //! Derivation and weights: `docs/RETARGET.md`.
 
+mod composite;
+mod fk;
 mod rows;
 
 use super::collide::capsule_distance;
 use super::robot::Robot;
 use super::targets::{Plan, Targets};
-use crate::kinematics::cpu::{self, Workspace};
+use crate::kinematics::cpu::Workspace;
 use crate::solve::qp::{BoxQp, QpProblem, QpSolver};
 use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -96,6 +98,12 @@ pub struct Solver<'a> {
     pub settings: SolveSettings,
     pub ws: Workspace,
     y: Vec<f64>,
+    /// The specialised forward kinematics when the robot takes it ([`fk`]), and per motion at
+    /// the last [`Solver::forward`]: world axis, a world point on it (m) and rate `f'σ`.
+    fast: Option<fk::Fast>,
+    axes: Vec<Vector3<f64>>,
+    origins: Vec<Vector3<f64>>,
+    rates: Vec<f64>,
     h: DMatrix<f64>,
     g: DVector<f64>,
     lb: DVector<f64>,
@@ -117,10 +125,21 @@ pub struct Solver<'a> {
     /// Per body: the coordinate-driven motions on its chain, `(motion, coordinate, rotation?)`
     /// (each robot coordinate drives one motion: hinges and the free joint).
     chains: Vec<Vec<(usize, usize, bool)>>,
+    /// Per body, where its own joint's motions start in its chain.
+    own: Vec<usize>,
+    /// The point rows' sums per body, then per subtree ([`composite`]), about `centre` (m), and
+    /// per motion its turn and the motion of the point at `centre`.
+    composites: Vec<composite::Composite>,
+    centre: Vector3<f64>,
+    spatial: Vec<(Vector3<f64>, Vector3<f64>)>,
     /// Capsule ends in world (m), refreshed each iteration, and each capsule's bounding sphere
     /// (centre, radius).
     ends: Vec<(Vector3<f64>, Vector3<f64>)>,
     bounds: Vec<(Vector3<f64>, f64)>,
+    /// Each capsule's bounding-sphere radius (m), and its axis-aligned box (world, lowest and
+    /// highest corner, m) at the last [`Solver::forward`].
+    radii: Vec<f64>,
+    boxes: Vec<(Vector3<f64>, Vector3<f64>)>,
     /// The pairs that may come within the collision margin ([`Solver::list_pairs`]), in pair
     /// order, and the capsule ends when they were listed.
     listed: Vec<usize>,
@@ -131,6 +150,8 @@ pub struct Solver<'a> {
     sticky: Vec<bool>,
     /// A ground or collision row came on in the last assembly.
     activated: bool,
+    /// [`Solver::closest_pair`] at the end of the last frame.
+    closest: f64,
     /// The last measured contractions of the steps (`ρ`, a step over the one before it), newest
     /// first: their largest estimates what a frame's first step leaves to come
     /// ([`Solver::borrowed_contraction`]).
@@ -151,6 +172,10 @@ impl<'a> Solver<'a> {
             settings,
             ws: Workspace::new(&robot.model),
             y: Vec::with_capacity(robot.model.ny()),
+            fast: fk::Fast::new(&robot.model),
+            axes: vec![Vector3::zeros(); robot.model.motions.len()],
+            origins: vec![Vector3::zeros(); robot.model.motions.len()],
+            rates: vec![1.0; robot.model.motions.len()],
             h: DMatrix::zeros(n, n),
             g: DVector::zeros(n),
             lb: DVector::zeros(n),
@@ -159,20 +184,33 @@ impl<'a> Solver<'a> {
             last_dx: DVector::zeros(n),
             moved_from: vec![Vector3::zeros(); robot.model.nb()],
             turned_from: vec![Matrix3::zeros(); robot.model.nb()],
-            qp: BoxQp::with_capacity(n),
+            qp: {
+                let mut qp = BoxQp::with_capacity(n);
+                qp.symmetric = true;
+                qp
+            },
             cols: Vec::with_capacity(n),
             jp: vec![Vector3::zeros(); n],
             jr: vec![Vector3::zeros(); n],
             row_cols: Vec::with_capacity(n),
             row: vec![0.0; n],
-            chains: chain_motions(&robot.model),
+            chains: rows::chain_motions(&robot.model),
+            own: (0..robot.model.nb())
+                .map(|b| robot.model.bodies[b].parent.map_or(0, |p| rows::chain_motions_len(&robot.model, p)))
+                .collect(),
+            composites: vec![composite::Composite::zero(); robot.model.nb()],
+            centre: Vector3::zeros(),
+            spatial: vec![(Vector3::zeros(), Vector3::zeros()); robot.model.motions.len()],
             ends: vec![(Vector3::zeros(), Vector3::zeros()); robot.capsules.len()],
             bounds: vec![(Vector3::zeros(), 0.0); robot.capsules.len()],
+            radii: robot.capsules.iter().map(|c| 0.5 * (c.b - c.a).norm() + c.radius).collect(),
+            boxes: vec![(Vector3::zeros(), Vector3::zeros()); robot.capsules.len()],
             listed: Vec::with_capacity(robot.pairs.len()),
             // Far away: the first forward kinematics lists the pairs.
             listed_at: vec![(Vector3::repeat(f64::INFINITY), Vector3::zeros()); robot.capsules.len()],
             sticky: vec![false; robot.pairs.len()],
             activated: false,
+            closest: f64::INFINITY,
             contractions: [f64::INFINITY; CONTRACTIONS],
             unmeasured: 0,
             grounded: vec![false; 2 * robot.capsules.len()],
@@ -185,6 +223,13 @@ impl<'a> Solver<'a> {
     pub fn plan(&self) -> &'a Plan {
         self.plan
     }
+    /// Motion `k` at the last [`Solver::forward`]: world axis, a world point on it (m), and its
+    /// rate `f'σ`.
+    #[inline]
+    fn motion(&self, k: usize) -> (Vector3<f64>, Vector3<f64>, f64) {
+        (self.axes[k], self.origins[k], self.rates[k])
+    }
+
     /// Capsule ends in world (m) at the last [`Solver::forward`].
     pub fn ends(&self) -> &[(Vector3<f64>, Vector3<f64>)] {
         &self.ends
@@ -192,16 +237,24 @@ impl<'a> Solver<'a> {
 
     /// Forward kinematics of `q` into `self.ws`, and the capsules' world ends.
     pub fn forward(&mut self, q: &[f64]) {
-        self.robot.state(q, &mut self.y);
-        cpu::forward(&self.robot.model, &self.y, &mut self.ws);
+        match &self.fast {
+            Some(f) => f.forward(q, &mut self.ws, &mut self.axes, &mut self.origins),
+            None => {
+                self.robot.state(q, &mut self.y);
+                let (axes, origins, rates) = (&mut self.axes, &mut self.origins, &mut self.rates);
+                fk::general(&self.robot.model, &self.y, &mut self.ws, axes, origins, rates);
+            }
+        }
         let mut moved = 0.0_f64;
         for (k, c) in self.robot.capsules.iter().enumerate() {
             let (r, p) = (&self.ws.body_rot[c.body], &self.ws.body_pos[c.body]);
             let e = (p + r * c.a, p + r * c.b);
             let at = &self.listed_at[k];
             moved = moved.max((e.0 - at.0).norm_squared()).max((e.1 - at.1).norm_squared());
+            let r = Vector3::repeat(c.radius);
+            self.boxes[k] = (e.0.inf(&e.1) - r, e.0.sup(&e.1) + r);
             self.ends[k] = e;
-            self.bounds[k] = ((e.0 + e.1) * 0.5, 0.5 * (c.b - c.a).norm() + c.radius);
+            self.bounds[k] = ((e.0 + e.1) * 0.5, self.radii[k]);
         }
         if moved > LIST_SLACK * LIST_SLACK {
             self.list_pairs();
@@ -238,31 +291,49 @@ impl<'a> Solver<'a> {
         self.grounded.fill(false);
         // Each run of iterations ends with the forward kinematics of its result.
         let mut used = self.iterate(t, i, q, prev, pins, iterations, 1.0);
-        if self.closest_pair() < 0.0 {
+        self.closest = self.closest_pair();
+        if self.closest < 0.0 {
             // Still overlapping where the penalty balanced the tasks: the collision rows a
             // hundred times stiffer for as many iterations again.
             used += self.iterate(t, i, q, prev, pins, iterations, 100.0);
+            self.closest = self.closest_pair();
         }
         let lift = self.lowest_sole().min(0.0);
         if lift < 0.0 {
             q[2] -= lift;
             self.forward(q);
+            self.closest = self.closest_pair();
         }
         used
     }
 
     /// The smallest signed distance (m) between two capsules that may collide, among those whose
-    /// bounding spheres touch (`+∞` when none do: then no pair overlaps).
+    /// bounding spheres and boxes touch (`+∞` when none do: then no pair overlaps).
     pub fn closest_pair(&self) -> f64 {
         let mut best = f64::INFINITY;
         for &p in &self.listed {
             let (i, j) = self.robot.pairs[p];
             let ((bi, ri), (bj, rj)) = (self.bounds[i], self.bounds[j]);
-            if (bi - bj).norm_squared() <= (ri + rj).powi(2) {
+            if (bi - bj).norm_squared() <= (ri + rj).powi(2) && !self.apart(i, j, 0.0) {
                 best = best.min(self.pair_distance(i, j).0);
             }
         }
         best
+    }
+
+    /// Whether the boxes of capsules `i` and `j` lie more than `m` (m) apart along an axis: then
+    /// so do the capsules, and their distance need not be computed (a margin of 1e-12 m keeps
+    /// that true of the computed distance).
+    #[inline]
+    fn apart(&self, i: usize, j: usize, m: f64) -> bool {
+        let ((lo_i, hi_i), (lo_j, hi_j)) = (&self.boxes[i], &self.boxes[j]);
+        let gap = (lo_i - hi_j).sup(&(lo_j - hi_i)).max();
+        gap > m + 1e-12
+    }
+
+    /// [`Solver::closest_pair`] at the end of the last [`Solver::frame`].
+    pub fn frame_closest(&self) -> f64 {
+        self.closest
     }
 
     /// Signed distance (m) between capsules `i` and `j` at the last [`Solver::forward`], and
@@ -371,7 +442,10 @@ impl<'a> Solver<'a> {
         self.listed.iter().any(|&p| {
             let (i, j) = self.robot.pairs[p];
             let ((bi, ri), (bj, rj)) = (self.bounds[i], self.bounds[j]);
-            !self.sticky[p] && (bi - bj).norm_squared() <= (ri + rj + ms).powi(2) && self.pair_distance(i, j).0 < ms
+            !self.sticky[p]
+                && (bi - bj).norm_squared() <= (ri + rj + ms).powi(2)
+                && !self.apart(i, j, ms)
+                && self.pair_distance(i, j).0 < ms
         })
     }
 
@@ -404,23 +478,6 @@ impl<'a> Solver<'a> {
     }
 }
 
-/// Per body, the coordinate-driven motions of its chain (root first).
-fn chain_motions(model: &crate::model::Model) -> Vec<Vec<(usize, usize, bool)>> {
-    (0..model.nb())
-        .map(|b| {
-            model
-                .chain(b)
-                .iter()
-                .flat_map(|&a| model.bodies[a].joint.motions.clone())
-                .filter_map(|k| {
-                    let m = &model.motions[k];
-                    m.coordinate.map(|c| (k, c, m.kind == crate::model::MotionKind::Rotation))
-                })
-                .collect()
-        })
-        .collect()
-}
-
 /// `log(R_target R_bodyᵀ)`: the world rotation vector taking the body to the target (rad).
 pub fn rot_error(target: &Matrix3<f64>, body: &Matrix3<f64>) -> Vector3<f64> {
     Rotation3::from_matrix_unchecked(target * body.transpose()).scaled_axis()
@@ -433,7 +490,7 @@ mod tests {
     use rand::{RngExt, SeedableRng};
 
     /// A random in-range G1 posture (root anywhere near the origin).
-    fn posture(robot: &Robot, rng: &mut rand_chacha::ChaCha8Rng) -> Vec<f64> {
+    pub(super) fn posture(robot: &Robot, rng: &mut rand_chacha::ChaCha8Rng) -> Vec<f64> {
         robot
             .model
             .coordinates
@@ -446,7 +503,7 @@ mod tests {
     }
 
     /// The shipped G1 and a plan with no tasks, for a [`Solver`] with default settings.
-    fn g1() -> (Robot, Plan) {
+    pub(super) fn g1() -> (Robot, Plan) {
         let (_, robot) = shipped("g1").unwrap().unwrap();
         let plan = Plan {
             tasks: vec![],

@@ -1,7 +1,9 @@
-//! The least-squares rows of the per-frame QP (`H`'s upper triangle and `g`), one function per
-//! kind: mapped tasks and foot pins, ground rows, collision rows, and the diagonal terms with the
-//! hard bounds (`docs/RETARGET.md` §4).
+//! The least-squares rows of the per-frame QP (`H`, both triangles, and `g`), one function per
+//! kind: mapped tasks and foot pins, ground rows (points on bodies, summed per subtree:
+//! [`super::composite`]), collision rows, and the diagonal terms with the hard bounds
+//! (`docs/RETARGET.md` §4).
 
+use super::composite::Weight;
 use super::{rot_error, Pin, Solver};
 use crate::retarget::targets::Targets;
 use nalgebra::Vector3;
@@ -15,29 +17,29 @@ impl Solver<'_> {
         prev: Option<(&[f64], f64)>,
         pins: &[Option<Pin>],
     ) {
-        // The QP reads H's upper triangle only: that is all that is written.
+        // Both triangles: the QP reads the upper one, and factors from the lower one's columns.
         self.h.as_mut_slice().fill(0.0);
         self.activated = false;
         self.g.fill(0.0);
+        self.start_points();
         for k in 0..self.plan.tasks.len() {
             let task = &self.plan.tasks[k];
             let (b, wp, wr) = (task.robot_body, task.w_pos, task.w_rot);
             let x = self.ws.body_pos[b];
             let ep = t.pos[i][k] - x;
             let er = if wr > 0.0 { rot_error(&t.rot[i][k], &self.ws.body_rot[b]) } else { Vector3::zeros() };
-            self.point_jacobian(b, &x);
-            self.add_pose(wp, &ep, wr, &er);
+            self.add_point(b, &x, Weight::Isotropic(wp), &ep, wr, &er);
         }
         for (f, pin) in self.plan.feet.iter().zip(pins) {
             if let Some(pin) = pin {
                 let (b, w) = (f.robot_body, self.settings.contact);
                 let x = self.ws.body_pos[b];
                 let er = rot_error(&pin.rot, &self.ws.body_rot[b]);
-                self.point_jacobian(b, &x);
-                self.add_pose(w, &(pin.pos - x), w, &er);
+                self.add_point(b, &x, Weight::Isotropic(w), &(pin.pos - x), w, &er);
             }
         }
         self.add_ground();
+        self.add_points();
         self.add_collisions();
         self.add_diagonal(q, prev);
     }
@@ -49,7 +51,7 @@ impl Solver<'_> {
     pub(super) fn point_jacobian(&mut self, b: usize, x: &Vector3<f64>) {
         self.cols.clear();
         for &(k, j, rotation) in &self.chains[b] {
-            let (axis, origin, rate) = self.ws.motion(k);
+            let (axis, origin, rate) = self.motion(k);
             let w = axis * rate;
             self.cols.push(j);
             if rotation {
@@ -58,31 +60,6 @@ impl Solver<'_> {
             } else {
                 self.jp[j] = w;
                 self.jr[j] = Vector3::zeros();
-            }
-        }
-    }
-
-    /// `w_p |J_p Δ − e_p|² + w_r |J_ω Δ − e_r|²` with the Jacobian in `cols`, `jp`, `jr`
-    /// (upper triangle of `H`).
-    fn add_pose(&mut self, wp: f64, ep: &Vector3<f64>, wr: f64, er: &Vector3<f64>) {
-        let n = self.g.len();
-        let h = self.h.as_mut_slice();
-        if wr == 0.0 {
-            // Position only (most tasks): half the products.
-            for (ia, &a) in self.cols.iter().enumerate() {
-                let pa = self.jp[a] * wp;
-                self.g[a] -= pa.dot(ep);
-                for &b in &self.cols[ia..] {
-                    h[a.max(b) * n + a.min(b)] += pa.dot(&self.jp[b]);
-                }
-            }
-            return;
-        }
-        for (ia, &a) in self.cols.iter().enumerate() {
-            let (pa, ra) = (self.jp[a] * wp, self.jr[a] * wr);
-            self.g[a] -= pa.dot(ep) + ra.dot(er);
-            for &b in &self.cols[ia..] {
-                h[a.max(b) * n + a.min(b)] += pa.dot(&self.jp[b]) + ra.dot(&self.jr[b]);
             }
         }
     }
@@ -103,7 +80,7 @@ impl Solver<'_> {
         }
     }
 
-    /// `w (r · Δ − e)²` with the gathered row `r` (upper triangle of `H`).
+    /// `w (r · Δ − e)²` with the gathered row `r` (both triangles of `H`).
     fn add_gathered_row(&mut self, w: f64, e: f64) {
         let n = self.g.len();
         let h = self.h.as_mut_slice();
@@ -111,7 +88,11 @@ impl Solver<'_> {
             let ra = w * self.row[a];
             self.g[a] -= ra * e;
             for &b in &self.row_cols[ia..] {
-                h[a.max(b) * n + a.min(b)] += ra * self.row[b];
+                let v = ra * self.row[b];
+                h[a.max(b) * n + a.min(b)] += v;
+                if a != b {
+                    h[a.min(b) * n + a.max(b)] += v;
+                }
             }
         }
     }
@@ -130,10 +111,8 @@ impl Solver<'_> {
                 if gap < m || self.grounded[2 * k + e] {
                     self.activated |= !self.grounded[2 * k + e];
                     self.grounded[2 * k + e] = true;
-                    self.start_row();
-                    self.point_jacobian(body, &end);
-                    self.gather_row(&Vector3::z());
-                    self.add_gathered_row(w, m - gap);
+                    let none = Vector3::zeros();
+                    self.add_point(body, &end, Weight::Height(w), &Vector3::new(0.0, 0.0, m - gap), 0.0, &none);
                 }
             }
         }
@@ -147,7 +126,7 @@ impl Solver<'_> {
             let p = self.listed[l];
             let (i, j) = self.robot.pairs[p];
             let ((bi, ri), (bj, rj)) = (self.bounds[i], self.bounds[j]);
-            if !self.sticky[p] && (bi - bj).norm_squared() > (ri + rj + m).powi(2) {
+            if !self.sticky[p] && ((bi - bj).norm_squared() > (ri + rj + m).powi(2) || self.apart(i, j, m)) {
                 continue;
             }
             let (d, pa, pb) = self.pair_distance(i, j);
@@ -192,4 +171,28 @@ impl Solver<'_> {
             self.ub[j] = hi - q[j];
         }
     }
+}
+
+/// Per body, the coordinate-driven motions of its chain (root first).
+pub(super) fn chain_motions(model: &crate::model::Model) -> Vec<Vec<(usize, usize, bool)>> {
+    (0..model.nb())
+        .map(|b| {
+            model
+                .chain(b)
+                .iter()
+                .flat_map(|&a| model.bodies[a].joint.motions.clone())
+                .filter_map(|k| {
+                    let m = &model.motions[k];
+                    m.coordinate.map(|c| (k, c, m.kind == crate::model::MotionKind::Rotation))
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// How many coordinate-driven motions body `b`'s chain has ([`chain_motions`]).
+pub(super) fn chain_motions_len(model: &crate::model::Model, b: usize) -> usize {
+    let driven =
+        |a: &usize| model.bodies[*a].joint.motions.clone().filter(|&k| model.motions[k].coordinate.is_some()).count();
+    model.chain(b).iter().map(driven).sum()
 }

@@ -28,7 +28,8 @@
 //! blocks and along which `f` is nearly linear (`dᵀHd < 10⁻⁶ |∇fᵀd|`) means `f` is unbounded
 //! below on the box → also `NotPositiveDefinite`, naming the singular pivot.
 //!
-//! Only the upper triangle of `H` is read. Workspace grows to the largest `n` seen; no
+//! Only the upper triangle of `H` is read (and, with [`BoxQp::symmetric`], the lower one, in
+//! place of it, for the factorisation). Workspace grows to the largest `n` seen; no
 //! allocation afterwards.
 
 mod dense;
@@ -78,6 +79,9 @@ impl Default for BoxQpSettings {
 pub struct BoxQp {
     /// Algorithm knobs; may be changed between solves.
     pub settings: BoxQpSettings,
+    /// The caller fills both triangles of `H` (symmetric): the factorisation then copies `H_FF`
+    /// from its contiguous lower columns instead of gathering the upper rows. Default false.
+    pub symmetric: bool,
     grad: Vec<f64>,
     dir: Vec<f64>,
     cand: Vec<f64>,
@@ -140,10 +144,19 @@ impl BoxQp {
         let nf = self.free.len();
         let chol = &mut self.chol[..nf * nf];
         for (a, &fa) in self.free.iter().enumerate() {
-            // L-column a, rows b ≥ a: H[fa, fb] read from the upper triangle (fa ≤ fb).
             let col = &mut chol[a * nf + a..(a + 1) * nf];
-            for (c, &fb) in col.iter_mut().zip(&self.free[a..]) {
-                *c = h[fb * n + fa];
+            if !self.symmetric {
+                // L-column a, rows b ≥ a: H[fa, fb] read from the upper triangle (fa ≤ fb).
+                for (c, &fb) in col.iter_mut().zip(&self.free[a..]) {
+                    *c = h[fb * n + fa];
+                }
+            } else if self.free[nf - 1] - fa == nf - 1 - a {
+                // The free variables from fa on are a run: H's column fa below the diagonal.
+                col.copy_from_slice(&h[fa * n + fa..fa * n + fa + nf - a]);
+            } else {
+                for (c, &fb) in col.iter_mut().zip(&self.free[a..]) {
+                    *c = h[fa * n + fb];
+                }
             }
             col[0] += shift;
         }
@@ -153,7 +166,12 @@ impl BoxQp {
     /// Sets `grad = H x + g` and returns `f(x) = ½ xᵀ(grad + g)` (non-finite if `grad` is).
     fn gradient(&mut self, h: &[f64], g: &[f64], x: &[f64]) -> f64 {
         let n = g.len();
-        dense::symv_upper(h, n, x, &mut self.grad[..n]);
+        if x.iter().all(|&v| v == 0.0) {
+            // H 0 is +0 in every entry (H is finite): what the product gives, without it.
+            self.grad[..n].fill(0.0);
+        } else {
+            dense::symv_upper(h, n, x, &mut self.grad[..n]);
+        }
         for (gr, gi) in self.grad[..n].iter_mut().zip(g) {
             *gr += gi;
         }
