@@ -296,6 +296,10 @@ fn gltf_skin_error(take: &Take) -> (f64, f64) {
     let ws_: Vec<[f32; 4]> = r.read_weights(0).unwrap().into_f32().collect();
     let targets: Vec<Vec<[f32; 3]>> = r.read_morph_targets().map(|(p, _, _)| p.unwrap().collect()).collect();
     assert_eq!(targets.len(), body.correctives.len(), "one morph target per corrective");
+    for (t, k) in targets.iter().zip(&body.correctives) {
+        let moved = t.iter().filter(|d| **d != [0.0; 3]).count();
+        assert_eq!(moved, k.vertices.len(), "the sparse target moves the corrective's vertices");
+    }
     let mut pose_ws = smocap::body::PoseWorkspace::new(&take.model, &body);
     let scene = Up::Z.scene_from_world();
     let mut d = Vec::new();

@@ -73,7 +73,7 @@ pub struct Primitive {
     pub joints: Vec<[u16; 4]>,
     pub weights: Vec<[f32; 4]>,
     /// Morph targets: per target, a position displacement per position (the primitive's
-    /// frame, before skinning), blended by the mesh's weights.
+    /// frame, before skinning), blended by the mesh's weights; written as sparse accessors.
     pub targets: Vec<Vec<[f32; 3]>>,
 }
 
@@ -219,6 +219,49 @@ impl Builder {
         })
     }
 
+    /// A sparse VEC3 float accessor of `n` elements, zero but at `idx` (ascending) where they
+    /// are `values`; `min`/`max` over all `n` (as the specification asks of morph positions).
+    fn sparse_vec3(&mut self, n: usize, idx: &[u32], values: &[[f32; 3]]) -> json::Index<json::Accessor> {
+        let (mut lo, mut hi) = (vec![0f32; 3], vec![0f32; 3]);
+        for v in values {
+            for a in 0..3 {
+                lo[a] = lo[a].min(v[a]);
+                hi[a] = hi[a].max(v[a]);
+            }
+        }
+        let idx_bytes: Vec<u8> = idx.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let val_bytes: Vec<u8> = values.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+        let indices = self.view(&idx_bytes, None);
+        let vals = self.view(&val_bytes, None);
+        use json::accessor::sparse;
+        self.root.push(json::Accessor {
+            buffer_view: None,
+            byte_offset: None,
+            count: USize64::from(n),
+            component_type: Valid(json::accessor::GenericComponentType(json::accessor::ComponentType::F32)),
+            extensions: None,
+            extras: Default::default(),
+            type_: Valid(json::accessor::Type::Vec3),
+            min: Some(json::Value::from(lo)),
+            max: Some(json::Value::from(hi)),
+            name: None,
+            normalized: false,
+            sparse: Some(sparse::Sparse {
+                count: USize64::from(idx.len()),
+                indices: sparse::Indices {
+                    buffer_view: indices,
+                    byte_offset: USize64(0),
+                    component_type: Valid(json::accessor::IndexComponentType(json::accessor::ComponentType::U32)),
+                    extensions: None,
+                    extras: Default::default(),
+                },
+                values: sparse::Values { buffer_view: vals, byte_offset: USize64(0), extensions: None, extras: Default::default() },
+                extensions: None,
+                extras: Default::default(),
+            }),
+        })
+    }
+
     fn joints(&mut self, j: &[[u16; 4]]) -> json::Index<json::Accessor> {
         let bytes: Vec<u8> = j.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
         let view = self.view(&bytes, Some(json::buffer::Target::ArrayBuffer));
@@ -317,8 +360,10 @@ pub fn to_glb(doc: &Document) -> Result<Vec<u8>, GltfError> {
                 .targets
                 .iter()
                 .map(|t| {
-                    let d: Vec<f32> = t.iter().flatten().copied().collect();
-                    let positions = Some(b.floats(&d, Type::Vec3, 3, true, target));
+                    // sparse: a corrective moves a few hundred of the body's vertices
+                    let idx: Vec<u32> = (0..t.len() as u32).filter(|&i| t[i as usize] != [0.0; 3]).collect();
+                    let values: Vec<[f32; 3]> = idx.iter().map(|&i| t[i as usize]).collect();
+                    let positions = Some(b.sparse_vec3(t.len(), &idx, &values));
                     json::mesh::MorphTarget { positions, normals: None, tangents: None }
                 })
                 .collect();
