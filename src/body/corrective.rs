@@ -27,7 +27,7 @@ pub struct Corrective {
 
 impl Corrective {
     /// Its weight with its pair's bodies turned by `parent` and `child` since the bind pose
-    /// (output frame; [`super::PoseWorkspace::since_bind`]).
+    /// (output frame; [`super::PoseWorkspace::add_corrective`]'s `since`).
     pub fn weight(&self, parent: &Matrix3<f64>, child: &Matrix3<f64>) -> f64 {
         let e = parent.transpose() * child;
         let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(e));

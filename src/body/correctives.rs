@@ -22,7 +22,7 @@
 //! weights are animated ([`crate::render::scene`]).
 
 pub use super::corrective::Corrective;
-use super::helpers::{Helper, JointInfluence};
+use super::helpers::Helper;
 use super::pose::{Dressed, PoseWorkspace};
 use crate::model::Model;
 use nalgebra::{Rotation3, Unit, Vector3};
@@ -56,19 +56,6 @@ fn spread(f: &mut Vec<f64>, neighbours: &[Vec<u32>], rounds: usize) {
         }
         std::mem::swap(f, &mut next);
     }
-}
-
-/// Area-weighted vertex normals (unit) of a closed counter-clockwise mesh.
-fn normals(v: &[[f32; 3]], triangles: &[[u32; 3]]) -> Vec<Vector3<f64>> {
-    let p = |i: u32| Vector3::new(v[i as usize][0] as f64, v[i as usize][1] as f64, v[i as usize][2] as f64);
-    let mut n = vec![Vector3::zeros(); v.len()];
-    for t in triangles {
-        let c = (p(t[1]) - p(t[0])).cross(&(p(t[2]) - p(t[0])));
-        for &i in t {
-            n[i as usize] += c;
-        }
-    }
-    n.iter().map(|x| x / x.norm().max(1e-30)).collect()
 }
 
 /// Per vertex, its share in the chain of pair `(a, d)` and where along it (`t`: 0 at `a`, 1 at
@@ -158,7 +145,7 @@ pub fn build(model: &Model, body: &Dressed, asset: &super::BodyAsset, scales: &[
     let nb = model.nb();
     let neighbours = super::metrics::neighbours(&body.triangles, rest.len());
     // normals averaged as widely as the fields, so a dimple (the navel) moves as a whole
-    let mut n = normals(&rest, &body.triangles);
+    let mut n = super::metrics::vertex_normals(&rest, &body.triangles);
     for a in 0..3 {
         let mut f: Vec<f64> = n.iter().map(|x| x[a]).collect();
         spread(&mut f, &neighbours, SPREAD);
@@ -231,7 +218,7 @@ fn calibrate(
 ) -> Vec<f64> {
     let mut volume_at = |bend_angle: f64, w: f64| {
         bend(model, body, y, c, &Unit::new_unchecked(k.axis), k.sign * bend_angle, ws);
-        add(k, w, &body.binding.helpers.joints, ws);
+        ws.add_corrective(k, w, &body.binding.helpers.joints);
         super::metrics::volume(&ws.vertices, &body.triangles)
     };
     (1..=CALIBRATION_KEYS)
@@ -254,12 +241,6 @@ fn bend(model: &Model, body: &Dressed, y: &[f64], c: usize, axis: &Unit<Vector3<
     }
     ws.refresh_helpers(body);
     body.skin_only(ws);
-}
-
-/// Adds corrective `k` at weight `w` to the posed vertices of `ws` (its joints posed).
-fn add(k: &Corrective, w: f64, joints: &[[JointInfluence; 4]], ws: &mut PoseWorkspace) {
-    let (since, out) = ws.corrective_parts();
-    k.add_to(w, joints, since, out);
 }
 
 #[cfg(test)]

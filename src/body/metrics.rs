@@ -29,6 +29,20 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 
+/// Area-weighted vertex normals (unit; zero-area stays zero) of counter-clockwise `triangles`.
+pub fn vertex_normals(vertices: &[[f32; 3]], triangles: &[[u32; 3]]) -> Vec<nalgebra::Vector3<f64>> {
+    use nalgebra::Vector3;
+    let p = |i: u32| Vector3::from(vertices[i as usize].map(|x| x as f64));
+    let mut n = vec![Vector3::zeros(); vertices.len()];
+    for t in triangles {
+        let c = (p(t[1]) - p(t[0])).cross(&(p(t[2]) - p(t[0])));
+        for &i in t {
+            n[i as usize] += c;
+        }
+    }
+    n.iter().map(|x| x / x.norm().max(1e-30)).collect()
+}
+
 /// Each vertex's neighbours along the edges of `triangles` (`n` vertices), ascending.
 pub fn neighbours(triangles: &[[u32; 3]], n: usize) -> Vec<Vec<u32>> {
     let mut out = vec![Vec::new(); n];

@@ -16,6 +16,7 @@
 use super::asset::{BodyAsset, BodyShape, Phenotype};
 use super::bind::{bind, bind_from, Binding};
 use super::corrective::Corrective;
+use super::helpers::JointInfluence;
 use super::segments::BindError;
 use crate::kinematics::cpu::{forward, Workspace};
 use crate::model::anthropometry::Sex;
@@ -85,11 +86,6 @@ impl PoseWorkspace {
         (self.turn[j], self.pos[j])
     }
 
-    /// Body `b`'s rotation since the bind pose (output frame), after [`Dressed::pose_joints`].
-    pub fn since_bind(&self, b: usize) -> Matrix3<f64> {
-        self.since[b]
-    }
-
     /// Turns body `b`'s map by `g` about `centre` (output frame; helpers and correctives' joints
     /// stale until [`PoseWorkspace::refresh_helpers`]).
     pub(super) fn turn_body(&mut self, b: usize, g: &Matrix3<f64>, centre: &Vector3<f64>) {
@@ -109,9 +105,10 @@ impl PoseWorkspace {
         }
     }
 
-    /// The joints' rotations since the bind pose and the posed vertices.
-    pub(super) fn corrective_parts(&mut self) -> (&[Matrix3<f64>], &mut [[f32; 3]]) {
-        (&self.since, &mut self.vertices)
+    /// Adds corrective `k` at weight `w` to the posed vertices, turned by the joints (posed)
+    /// that `joints` blends each vertex over.
+    pub(super) fn add_corrective(&mut self, k: &Corrective, w: f64, joints: &[[JointInfluence; 4]]) {
+        k.add_to(w, joints, &self.since, &mut self.vertices);
     }
 
     pub fn new(model: &Model, body: &Dressed) -> PoseWorkspace {
@@ -273,7 +270,7 @@ impl Dressed {
         self.pose_joints(model, y, ws);
         self.skin_only(ws);
         for (k, c) in self.correctives.iter().enumerate() {
-            c.add_to(ws.morph[k], &self.binding.helpers.joints, &ws.since, &mut ws.vertices);
+            ws.add_corrective(c, ws.morph[k], &self.binding.helpers.joints);
         }
     }
 

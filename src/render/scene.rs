@@ -234,16 +234,10 @@ fn skinned_body(doc: &mut Document, take: &Take, up: Up, body: &Dressed) -> (usi
             [p.x as f32, p.y as f32, p.z as f32]
         })
         .collect();
-    let mut normals = vec![Vector3::<f64>::zeros(); positions.len()];
-    let p3 = |i: u32| positions[i as usize].map(|x| x as f64).into();
-    for t in &body.triangles {
-        let (a, b, c): (Vector3<f64>, Vector3<f64>, Vector3<f64>) = (p3(t[0]), p3(t[1]), p3(t[2]));
-        let n = (b - a).cross(&(c - a));
-        for &i in t {
-            normals[i as usize] += n;
-        }
-    }
-    let normals = normals.iter().map(|n| (n / n.norm().max(1e-30)).map(|x| x as f32).into()).collect();
+    let normals = crate::body::metrics::vertex_normals(&positions, &body.triangles)
+        .iter()
+        .map(|n| n.map(|x| x as f32).into())
+        .collect();
     let mut prim = Primitive {
         positions,
         normals,
