@@ -67,7 +67,6 @@ fn world_at_key(doc: &gltf::Gltf, key: usize) -> (Vec<Matrix4<f64>>, Vec<String>
                 gltf::animation::util::ReadOutputs::Rotations(q) => trs[i].1 = q.into_f32().nth(key).unwrap(),
                 gltf::animation::util::ReadOutputs::Scales(mut s) => trs[i].2 = s.nth(key).unwrap(),
                 gltf::animation::util::ReadOutputs::MorphTargetWeights(_) => {} // [`morph_weights_at_key`]
-
             }
         }
     }
@@ -260,7 +259,9 @@ fn morph_weights_at_key(doc: &gltf::Gltf, node: usize, targets: usize, key: usiz
     let blob = doc.blob.as_deref().unwrap();
     for anim in doc.document.animations() {
         for ch in anim.channels().filter(|c| c.target().node().index() == node) {
-            if let gltf::animation::util::ReadOutputs::MorphTargetWeights(w) = ch.reader(|_| Some(blob)).read_outputs().unwrap() {
+            if let gltf::animation::util::ReadOutputs::MorphTargetWeights(w) =
+                ch.reader(|_| Some(blob)).read_outputs().unwrap()
+            {
                 return w.into_f32().skip(key * targets).take(targets).map(|x| x as f64).collect();
             }
         }

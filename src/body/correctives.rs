@@ -225,14 +225,26 @@ fn calibrate(
         .map(|i| {
             let angle = i as f64 * CALIBRATION_STEP;
             let (v0, v1) = (volume_at(angle, 0.0), volume_at(angle, 1.0));
-            if v1 > v0 + 1e-12 { ((rest_volume - v0) / (v1 - v0)).clamp(0.0, MAX_WEIGHT) } else { 0.0 }
+            if v1 > v0 + 1e-12 {
+                ((rest_volume - v0) / (v1 - v0)).clamp(0.0, MAX_WEIGHT)
+            } else {
+                0.0
+            }
         })
         .collect()
 }
 
 /// Poses `body` at state `y` with the bodies below `c` turned by `angle` about `axis` through
 /// `c`'s origin (the output frame), skinned into `ws.vertices` without correctives.
-fn bend(model: &Model, body: &Dressed, y: &[f64], c: usize, axis: &Unit<Vector3<f64>>, angle: f64, ws: &mut PoseWorkspace) {
+fn bend(
+    model: &Model,
+    body: &Dressed,
+    y: &[f64],
+    c: usize,
+    axis: &Unit<Vector3<f64>>,
+    angle: f64,
+    ws: &mut PoseWorkspace,
+) {
     body.pose_joints(model, y, ws);
     let g = Rotation3::from_axis_angle(axis, angle).into_inner();
     let centre = ws.joint(c).1;

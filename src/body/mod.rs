@@ -29,6 +29,7 @@ pub mod bind;
 pub mod corrective;
 pub mod correctives;
 pub mod fit;
+mod forearm;
 pub mod helpers;
 pub mod influence;
 pub mod keypoints;

@@ -122,7 +122,10 @@ pub enum Values {
     Rotation(Vec<[f32; 4]>),
     Scale(Vec<[f32; 3]>),
     /// Morph target weights: `per_key` (the mesh's target count) per key time, key by key.
-    Weights { per_key: usize, values: Vec<f32> },
+    Weights {
+        per_key: usize,
+        values: Vec<f32>,
+    },
 }
 
 /// One animated property of one node.
@@ -255,7 +258,12 @@ impl Builder {
                     extensions: None,
                     extras: Default::default(),
                 },
-                values: sparse::Values { buffer_view: vals, byte_offset: USize64(0), extensions: None, extras: Default::default() },
+                values: sparse::Values {
+                    buffer_view: vals,
+                    byte_offset: USize64(0),
+                    extensions: None,
+                    extras: Default::default(),
+                },
                 extensions: None,
                 extras: Default::default(),
             }),
