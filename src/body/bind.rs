@@ -27,13 +27,13 @@
 //! against thighs that kept their girth, and the groin folded flat already at rest (DJ5: 63
 //! edges under half their bind length; 42 % of its edge-frames out of 0.5–2× in motion came
 //! from them). So the hips' pairs leave out their side-to-side part and the pelvis keeps its
-//! own width ([`PelvisWidth`]): the cubes give the hips' height and fore–aft place, the model
+//! own width (`PelvisWidth`): the cubes give the hips' height and fore–aft place, the model
 //! their width. The hips now sit 3.1–3.9 cm inside the cubes each side (shipped, Rajagopal,
 //! OpenCap), and DJ5's edge-frames in range went 99.871 → 99.916 %.
 //!
-//! The joint centres leave each forearm's roll free: a [`super::forearm::ForearmRoll`] residual turns the radius
-//! so that the model's hand lies as the mesh's does (palm toward the thigh), whatever pronation
-//! the model calls neutral. Without it the mesh's hand hung on OpenSim's supinated default and
+//! The joint centres leave each forearm's roll free: a roll residual (`body/forearm.rs`) turns
+//! the radius so that the model's hand lies as the mesh's does (palm toward the thigh),
+//! whatever pronation the model calls neutral. Without it the mesh's hand hung on OpenSim's supinated default and
 //! walking's 90–120° of pronation twisted the forearm skin flat (edge-frames within 0.5–2× rest
 //! on the OpenCap walk: 99.84 % before, 99.91 % with it).
 //!
@@ -138,7 +138,7 @@ pub struct Binding {
     pub body_rot: Vec<Matrix3<f64>>,
     pub body_pos: Vec<Vector3<f64>>,
     /// Per pair of [`targets`]: body name and distance (m) from its origin to its target at `y`
-    /// (a hip's without its side-to-side part, [`PelvisWidth`]).
+    /// (a hip's without its side-to-side part: the pelvis keeps the model's width).
     pub errors: Vec<(String, f64)>,
     pub iterations: usize,
     /// Per vertex, up to four influences, largest first (unused: weight 0), weights summing to 1.
